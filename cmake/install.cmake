@@ -1,0 +1,20 @@
+# Install the library so other projects can find_package(meshsweeper CONFIG).
+include(GNUInstallDirs)
+include(CMakePackageConfigHelpers)
+install(TARGETS meshsweeper EXPORT meshsweeperTargets
+  ARCHIVE DESTINATION ${CMAKE_INSTALL_LIBDIR}
+  LIBRARY DESTINATION ${CMAKE_INSTALL_LIBDIR})
+foreach(module core deform collision)
+  install(DIRECTORY ${PROJECT_SOURCE_DIR}/${module}/ DESTINATION include/meshsweeper/${module}
+          FILES_MATCHING PATTERN "*.h")
+endforeach()
+install(EXPORT meshsweeperTargets NAMESPACE meshsweeper::
+        DESTINATION ${CMAKE_INSTALL_LIBDIR}/cmake/meshsweeper)
+configure_package_config_file(${PROJECT_SOURCE_DIR}/cmake/meshsweeperConfig.cmake.in
+  ${PROJECT_BINARY_DIR}/meshsweeperConfig.cmake
+  INSTALL_DESTINATION ${CMAKE_INSTALL_LIBDIR}/cmake/meshsweeper)
+write_basic_package_version_file(${PROJECT_BINARY_DIR}/meshsweeperConfigVersion.cmake
+  COMPATIBILITY SameMajorVersion)
+install(FILES ${PROJECT_BINARY_DIR}/meshsweeperConfig.cmake
+              ${PROJECT_BINARY_DIR}/meshsweeperConfigVersion.cmake
+        DESTINATION ${CMAKE_INSTALL_LIBDIR}/cmake/meshsweeper)

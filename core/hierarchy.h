@@ -1,0 +1,109 @@
+#pragma once
+// The Meshsweeper hierarchy: fixed, shareable tables built once per mesh (DESIGN.md section 1).
+//
+// Simplification by vertex contractions (v -> u, u keeps its position) gives a cover tree of
+// triangle nodes: every original face is a leaf, every triangle a contraction creates is a node
+// responsible for the original faces of its subtree. The query tree stored here is that cover
+// tree collapsed to 8-wide nodes. Each child slot of a node carries two bounds of its subtree:
+//  - a box of the subtree's original vertices (float, rounded outward): fresh exact queries;
+//  - the node's own triangle (three original vertices, which lie on the surface) and its radius
+//    eps = max over the subtree's original vertices of their distance to that triangle: the
+//    paper's triangle swept by a sphere, used for [d - eps, d + eps] intervals.
+// Leaves are blocks of up to 8 original faces stored inline (double, SoA) in tree order.
+//
+// Immutable after build; share it as std::shared_ptr<const Hierarchy> between threads.
+#include "core/mesh.h"
+#include "core/triangle_distance.h"
+
+#include <memory>
+#include <string>
+#include <vector>
+
+namespace meshsweeper {
+
+// A child reference in a node: >= 0 an inner node index, < 0 a leaf block ~index (leafRef()).
+using ChildRef = int32_t;
+inline constexpr ChildRef kEmptyChild = INT32_MIN;  // unused slot; its box is empty
+inline bool isLeafRef(ChildRef c) { return c < 0 && c != kEmptyChild; }
+inline int32_t leafIndex(ChildRef c) { return ~c; }
+inline ChildRef leafRef(int32_t leaf) { return ~leaf; }
+
+// Eight children of one node, structure of arrays, one cache-aligned block per node.
+struct alignas(64) Node8 {
+  float lower[3][8];            // [axis][slot] subtree box, rounded down
+  float upper[3][8];            // [axis][slot] subtree box, rounded up (empty slot: lower > upper)
+  ChildRef child[8];            // [slot]
+  float eps[8];                 // [slot] swept-sphere radius of the slot's triangle, rounded up
+  VertexIndex corner[3][8];     // [corner][slot] the slot's triangle (original vertex indices)
+};
+
+// Up to eight original faces, inline and SoA, for testing eight at a time.
+struct LeafBlock {
+  TriangleBlock8 block;              // vertex coordinates; unused lanes copy lane 0
+  TriangleIndex triangle[8];         // [lane] original face index, kInvalidIndex when unused
+  uint32_t count;                    // used lanes, 1..8
+};
+
+struct BuildOptions {
+  // Stop contracting when this many triangles remain (the base mesh; its triangles are roots).
+  uint32_t base_triangles = 16;
+};
+
+// What the build did and what it costs; filled by build().
+struct HierarchyStats {
+  double contract_seconds = 0;  // simplification rounds
+  double tree_seconds = 0;      // cover tree -> 8-wide node tree, leaf blocks
+  double bounds_seconds = 0;    // boxes and radii
+  double total_seconds = 0;
+  uint32_t rounds = 0;          // contraction rounds
+  uint32_t contractions = 0;
+  uint32_t base_triangles = 0;  // triangles left in the base mesh (roots of the cover tree)
+  uint32_t depth = 0;           // levels of 8-wide nodes
+  size_t fixed_bytes = 0;       // memory of the fixed tables (nodes, leaves, mesh copy)
+};
+
+class Hierarchy {
+ public:
+  // Builds the hierarchy of a mesh. Throws MeshError if checkMesh() fails (empty mesh,
+  // non-finite coordinates, out-of-range indices). The mesh is copied.
+  static std::shared_ptr<const Hierarchy> build(const Mesh& mesh, const BuildOptions& options = {});
+
+  const Mesh& mesh() const { return mesh_; }
+  const HierarchyStats& stats() const { return stats_; }
+
+  // The query tree. nodes()[0] is the root node; a mesh of at most 8 faces has a root with one
+  // leaf child.
+  const std::vector<Node8>& nodes() const { return nodes_; }
+  const std::vector<LeafBlock>& leaves() const { return leaves_; }
+
+  // Contraction record: [vertex] the vertex it was contracted into (kInvalidIndex for base
+  // vertices and vertices no triangle uses), and the contraction radius r_v at that moment.
+  const std::vector<VertexIndex>& contractedInto() const { return contracted_into_; }
+  const std::vector<float>& contractionRadius() const { return contraction_radius_; }
+
+  // For an inner node: the range of leaf blocks of its subtree ([first, last) in leaves()).
+  // Leaves are laid out depth-first, so every subtree is a contiguous range.
+  uint32_t leafBegin(int32_t node) const { return leaf_begin_[node]; }
+  uint32_t leafEnd(int32_t node) const { return leaf_end_[node]; }
+  // [node] parent node index (-1 for the root) and the slot it occupies there.
+  int32_t parentNode(int32_t node) const { return parent_[node]; }
+
+ private:
+  friend class HierarchyBuilder;
+  Mesh mesh_;
+  HierarchyStats stats_;
+  std::vector<Node8> nodes_;
+  std::vector<LeafBlock> leaves_;
+  std::vector<uint32_t> leaf_begin_, leaf_end_;  // [node]
+  std::vector<int32_t> parent_;                  // [node]
+  std::vector<VertexIndex> contracted_into_;     // [vertex]
+  std::vector<float> contraction_radius_;        // [vertex]
+};
+
+// Checks the hierarchy's invariants: every original face appears in exactly one leaf lane;
+// every slot's box contains its subtree's vertices; every slot's eps bounds the distance from
+// its subtree's vertices to its triangle; parent links and leaf ranges are consistent.
+// Returns an empty string when valid, else a description of the first violation.
+std::string validate(const Hierarchy& hierarchy);
+
+}  // namespace meshsweeper

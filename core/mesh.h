@@ -1,0 +1,35 @@
+#pragma once
+// A triangle mesh as read from a file: positions and triangles in file order.
+// Any triangle set is valid: several components, holes, non-manifold edges, duplicate or
+// isolated vertices, degenerate triangles (repeated indices or collinear corners).
+#include "core/types.h"
+
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+namespace meshsweeper {
+
+struct Mesh {
+  std::vector<Vec3> positions;       // [vertex]
+  std::vector<Triangle> triangles;   // [triangle] polygons fan-triangulated in face order
+  std::string name;                  // file path or a procedural name, for messages
+};
+
+// Errors from reading or validating untrusted input. what() names the file (or mesh name) and
+// the problem, e.g. "bunny.off: face 12 uses vertex 9000 but the file has 3000 vertices".
+class MeshError : public std::runtime_error {
+ public:
+  using std::runtime_error::runtime_error;
+};
+
+// Checks what every builder needs: at least one triangle, finite coordinates, indices in range.
+// Returns an empty string when the mesh is usable, else "NAME: problem".
+std::string checkMesh(const Mesh& mesh);
+
+// Axis-aligned bounds of the vertices used by triangles. Precondition: checkMesh() passed.
+void meshBounds(const Mesh& mesh, Vec3& lower, Vec3& upper);
+// Length of the bounding-box diagonal. Precondition: checkMesh() passed.
+double meshDiagonal(const Mesh& mesh);
+
+}  // namespace meshsweeper

@@ -1,0 +1,27 @@
+#pragma once
+// Reading meshes and point lists from files. Every function here meets untrusted input: it
+// returns a result or throws MeshError naming the file and the problem; it never crashes,
+// hangs or allocates according to an absurd count in a header.
+#include "core/mesh.h"
+
+#include <string>
+#include <vector>
+
+namespace meshsweeper {
+
+// Reads OFF, OBJ, PLY (ASCII or binary) or STL (ASCII or binary), chosen by extension.
+// Vertex order and face order are the file's; polygons are fan-triangulated in face order
+// (face f with corners c0..ck gives (c0,c1,c2), (c0,c2,c3), ...), so a result's triangle index
+// indexes that triangle list. Throws MeshError ("PATH: problem") on a missing, unreadable,
+// truncated or garbage file, non-finite coordinates, out-of-range indices or an empty mesh.
+Mesh readMesh(const std::string& path);
+
+// Writes an ASCII OFF file. Throws MeshError when the file cannot be written.
+void writeOff(const Mesh& mesh, const std::string& path);
+
+// Reads query points: text, one "x y z" per line, '#' starts a comment, blank lines ignored;
+// path "-" reads standard input. Throws MeshError ("PATH:LINE: problem") on malformed lines or
+// non-finite values.
+std::vector<Vec3> readPoints(const std::string& path);
+
+}  // namespace meshsweeper

@@ -1,0 +1,35 @@
+#pragma once
+// Exact closest point from a point to a triangle, robust for degenerate triangles (segments,
+// points): every input gives a finite answer on the closed triangle.
+#include "core/types.h"
+
+namespace meshsweeper {
+
+// Which feature of triangle (a, b, c) holds the closest point.
+enum class Feature : uint8_t { kVertex0, kVertex1, kVertex2, kEdge01, kEdge12, kEdge20, kFace };
+
+struct TriangleClosest {
+  double squared_distance = 0;
+  Vec3 point = Vec3::Zero();        // closest point on the triangle
+  Vec3 barycentric = Vec3::Zero();  // point = b0*a + b1*b + b2*c, b_i >= 0, sum 1
+  Feature feature = Feature::kFace;
+};
+
+// Closest point on triangle (a, b, c) to p, with barycentric coordinates and the feature.
+TriangleClosest closestPointOnTriangle(const Vec3& p, const Vec3& a, const Vec3& b, const Vec3& c);
+
+// Squared distance only; equals closestPointOnTriangle(...).squared_distance up to rounding
+// (relative 1e-14) and is cheaper.
+double squaredDistanceToTriangle(const Vec3& p, const Vec3& a, const Vec3& b, const Vec3& c);
+
+// Eight triangles stored structure-of-arrays for testing several at a time:
+// v[corner][axis][lane]. Unused lanes must hold a copy of a used lane (never garbage).
+struct alignas(64) TriangleBlock8 {
+  double v[3][3][8];
+};
+
+// Squared distances from p to the eight triangles of `block` (out[lane]). Each value equals
+// squaredDistanceToTriangle for that lane's triangle up to rounding (relative 1e-14).
+void squaredDistancesToBlock(const Vec3& p, const TriangleBlock8& block, double out[8]);
+
+}  // namespace meshsweeper
