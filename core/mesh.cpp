@@ -1,0 +1,47 @@
+#include "core/mesh.h"
+
+#include <cmath>
+#include <limits>
+
+namespace meshsweeper {
+
+std::string checkMesh(const Mesh& mesh) {
+  const std::string name = mesh.name.empty() ? std::string("mesh") : mesh.name;
+  if (mesh.triangles.empty()) return name + ": the mesh has no triangles";
+  if (mesh.positions.size() >= kInvalidIndex)
+    return name + ": too many vertices (" + std::to_string(mesh.positions.size()) + ")";
+  if (mesh.triangles.size() >= static_cast<size_t>(INT32_MAX) / 2)
+    return name + ": too many triangles (" + std::to_string(mesh.triangles.size()) + ")";
+  for (size_t v = 0; v < mesh.positions.size(); ++v) {
+    if (!mesh.positions[v].allFinite())
+      return name + ": vertex " + std::to_string(v) + " has a non-finite coordinate";
+  }
+  const size_t n = mesh.positions.size();
+  for (size_t t = 0; t < mesh.triangles.size(); ++t) {
+    for (VertexIndex v : mesh.triangles[t]) {
+      if (v >= n)
+        return name + ": triangle " + std::to_string(t) + " uses vertex " + std::to_string(v) +
+               " but the mesh has " + std::to_string(n) + " vertices";
+    }
+  }
+  return {};
+}
+
+void meshBounds(const Mesh& mesh, Vec3& lower, Vec3& upper) {
+  lower = Vec3::Constant(std::numeric_limits<double>::infinity());
+  upper = -lower;
+  for (const Triangle& t : mesh.triangles) {
+    for (VertexIndex v : t) {
+      lower = lower.cwiseMin(mesh.positions[v]);
+      upper = upper.cwiseMax(mesh.positions[v]);
+    }
+  }
+}
+
+double meshDiagonal(const Mesh& mesh) {
+  Vec3 lower, upper;
+  meshBounds(mesh, lower, upper);
+  return (upper - lower).norm();
+}
+
+}  // namespace meshsweeper

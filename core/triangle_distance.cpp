@@ -1,0 +1,2 @@
+// Placeholder: implemented by the core issue.
+#include "core/triangle_distance.h"

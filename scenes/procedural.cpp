@@ -1,0 +1,1 @@
+// Placeholder: procedural meshes and point sets.
