@@ -1,2 +1,110 @@
-// Placeholder: implemented by the core issue.
+// Invariant checks of the hierarchy (DESIGN.md section 1), used by the tests.
 #include "core/hierarchy.h"
+
+#include <cmath>
+#include <sstream>
+
+namespace meshsweeper {
+namespace {
+
+std::string describe(const char* what, size_t node, int slot) {
+  std::ostringstream out;
+  out << what << " (node " << node << ", slot " << slot << ")";
+  return out.str();
+}
+
+}  // namespace
+
+std::string validate(const Hierarchy& h) {
+  const Mesh& mesh = h.mesh();
+  const auto& nodes = h.nodes();
+  const auto& blocks = h.leafBlocks();
+  const auto& lanes = h.leafTriangles();
+  const size_t m = mesh.triangles.size();
+  if (nodes.empty()) return "no root node";
+  if (lanes.size() != 8 * blocks.size()) return "leaf triangle table has the wrong size";
+
+  // Every original face in exactly one used leaf lane, with its coordinates inline.
+  std::vector<uint32_t> seen(m, 0);
+  for (uint32_t leaf = 0; leaf < blocks.size(); ++leaf) {
+    const uint32_t used = h.leafLanes(leaf);
+    if (used < 1 || used > 8) return "leaf " + std::to_string(leaf) + " has no used lane";
+    for (uint32_t lane = 0; lane < 8; ++lane) {
+      const TriangleIndex f = lanes[8 * leaf + lane];
+      if ((lane < used) != (f != kInvalidIndex))
+        return "leaf " + std::to_string(leaf) + " lane " + std::to_string(lane) + " misplaced";
+      if (f == kInvalidIndex) continue;
+      if (f >= m) return "leaf " + std::to_string(leaf) + " names a face out of range";
+      ++seen[f];
+      for (int k = 0; k < 3; ++k)
+        for (int axis = 0; axis < 3; ++axis)
+          if (blocks[leaf].v[k][axis][lane] != mesh.positions[mesh.triangles[f][k]][axis])
+            return "leaf " + std::to_string(leaf) + " holds wrong coordinates for face " +
+                   std::to_string(f);
+    }
+  }
+  for (size_t f = 0; f < m; ++f)
+    if (seen[f] != 1)
+      return "face " + std::to_string(f) + " appears in " + std::to_string(seen[f]) + " leaf lanes";
+
+  // Tree structure: every node but the root referenced once, by its recorded parent; every
+  // leaf block referenced once; subtree leaf ranges contiguous.
+  std::vector<uint32_t> node_refs(nodes.size(), 0), leaf_refs(blocks.size(), 0);
+  for (size_t node = 0; node < nodes.size(); ++node) {
+    for (int k = 0; k < 8; ++k) {
+      const ChildRef c = nodes[node].child[k];
+      if (c == kEmptyChild) continue;
+      if (isLeafRef(c)) {
+        if (static_cast<size_t>(leafIndex(c)) >= blocks.size()) return describe("leaf out of range", node, k);
+        ++leaf_refs[leafIndex(c)];
+        continue;
+      }
+      if (static_cast<size_t>(c) >= nodes.size() || c == 0) return describe("child out of range", node, k);
+      ++node_refs[c];
+      if (h.parentNode(c) != static_cast<int32_t>(node)) return describe("parent link broken", node, k);
+      if (h.leafBegin(c) < h.leafBegin(static_cast<int32_t>(node)) ||
+          h.leafEnd(c) > h.leafEnd(static_cast<int32_t>(node)))
+        return describe("child leaf range outside its parent's", node, k);
+    }
+  }
+  for (size_t node = 1; node < nodes.size(); ++node)
+    if (node_refs[node] != 1) return "node " + std::to_string(node) + " is not referenced once";
+  for (size_t leaf = 0; leaf < blocks.size(); ++leaf)
+    if (leaf_refs[leaf] != 1) return "leaf " + std::to_string(leaf) + " is not referenced once";
+  if (h.leafBegin(0) != 0 || h.leafEnd(0) != blocks.size()) return "root does not span all leaves";
+
+  // Bounds: every slot's box holds its subtree's vertices, and eps bounds their distance to
+  // the slot's triangle.
+  for (size_t node = 0; node < nodes.size(); ++node) {
+    const Node8& n = nodes[node];
+    for (int k = 0; k < 8; ++k) {
+      const ChildRef c = n.child[k];
+      if (c == kEmptyChild) continue;
+      uint32_t first = 0, last = 0;
+      if (isLeafRef(c)) { first = leafIndex(c); last = first + 1; }
+      else { first = h.leafBegin(c); last = h.leafEnd(c); }
+      for (int corner = 0; corner < 3; ++corner)
+        if (n.corner[corner][k] >= mesh.positions.size()) return describe("corner out of range", node, k);
+      const Vec3& a = mesh.positions[n.corner[0][k]];
+      const Vec3& b = mesh.positions[n.corner[1][k]];
+      const Vec3& cc = mesh.positions[n.corner[2][k]];
+      for (uint32_t leaf = first; leaf < last; ++leaf) {
+        for (uint32_t lane = 0; lane < h.leafLanes(leaf); ++lane) {
+          for (VertexIndex v : mesh.triangles[lanes[8 * leaf + lane]]) {
+            const Vec3& x = mesh.positions[v];
+            const Vec3 scaled = (x - h.center()) * h.boxScale();
+            for (int axis = 0; axis < 3; ++axis) {
+              if (!(n.lower[axis][k] <= scaled[axis] && scaled[axis] <= n.upper[axis][k]))
+                return describe("box misses a subtree vertex", node, k);
+            }
+            const double d = std::sqrt(squaredDistanceToTriangle(x, a, b, cc));
+            if (!(d <= n.eps[k])) return describe("eps below a subtree vertex's distance", node, k);
+          }
+        }
+      }
+    }
+  }
+  return {};
+}
+
+}  // namespace meshsweeper

@@ -9,7 +9,8 @@
 //  - the node's own triangle (three original vertices, which lie on the surface) and its radius
 //    eps = max over the subtree's original vertices of their distance to that triangle: the
 //    paper's triangle swept by a sphere, used for [d - eps, d + eps] intervals.
-// Leaves are blocks of up to 8 original faces stored inline (double, SoA) in tree order.
+// Leaves are blocks of up to 8 original faces stored inline (double, SoA) in tree order;
+// small leaf slots of one node are packed together so blocks are well filled.
 //
 // Immutable after build; share it as std::shared_ptr<const Hierarchy> between threads.
 #include "core/mesh.h"
@@ -37,12 +38,6 @@ struct alignas(64) Node8 {
   VertexIndex corner[3][8];     // [corner][slot] the slot's triangle (original vertex indices)
 };
 
-// Up to eight original faces, inline and SoA, for testing eight at a time.
-struct LeafBlock {
-  TriangleBlock8 block;              // vertex coordinates; unused lanes copy lane 0
-  TriangleIndex triangle[8];         // [lane] original face index, kInvalidIndex when unused
-  uint32_t count;                    // used lanes, 1..8
-};
 
 struct BuildOptions {
   // Stop contracting when this many triangles remain (the base mesh; its triangles are roots).
@@ -74,14 +69,28 @@ class Hierarchy {
   // The query tree. nodes()[0] is the root node; a mesh of at most 8 faces has a root with one
   // leaf child.
   const std::vector<Node8>& nodes() const { return nodes_; }
-  const std::vector<LeafBlock>& leaves() const { return leaves_; }
+  // [leaf] up to eight original faces inline (double, SoA); unused lanes copy lane 0.
+  const std::vector<TriangleBlock8>& leafBlocks() const { return leaf_blocks_; }
+  // [8 * leaf + lane] original face index of a leaf lane, kInvalidIndex when unused.
+  const std::vector<TriangleIndex>& leafTriangles() const { return leaf_triangles_; }
+  uint32_t leafCount() const { return static_cast<uint32_t>(leaf_blocks_.size()); }
+  // Used lanes of a leaf block (1..8); used lanes come first.
+  uint32_t leafLanes(int32_t leaf) const { return leaf_lanes_[leaf]; }
+
+  // Node boxes are stored in float as (x - center()) * boxScale(), boxScale() a power of two
+  // that maps the mesh into [-1, 1]; they are rounded outward and widened by a margin so that
+  // float rounding of a query point never makes a box bound exceed the true distance.
+  const Vec3& center() const { return center_; }
+  double boxScale() const { return box_scale_; }
+  // [vertex] some face that uses the vertex (kInvalidIndex for unused vertices).
+  const std::vector<TriangleIndex>& vertexFace() const { return vertex_face_; }
 
   // Contraction record: [vertex] the vertex it was contracted into (kInvalidIndex for base
   // vertices and vertices no triangle uses), and the contraction radius r_v at that moment.
   const std::vector<VertexIndex>& contractedInto() const { return contracted_into_; }
   const std::vector<float>& contractionRadius() const { return contraction_radius_; }
 
-  // For an inner node: the range of leaf blocks of its subtree ([first, last) in leaves()).
+  // For an inner node: the range of leaf blocks of its subtree ([first, last) in leafBlocks()).
   // Leaves are laid out depth-first, so every subtree is a contiguous range.
   uint32_t leafBegin(int32_t node) const { return leaf_begin_[node]; }
   uint32_t leafEnd(int32_t node) const { return leaf_end_[node]; }
@@ -93,7 +102,12 @@ class Hierarchy {
   Mesh mesh_;
   HierarchyStats stats_;
   std::vector<Node8> nodes_;
-  std::vector<LeafBlock> leaves_;
+  std::vector<TriangleBlock8> leaf_blocks_;
+  std::vector<TriangleIndex> leaf_triangles_;
+  std::vector<uint8_t> leaf_lanes_;
+  std::vector<TriangleIndex> vertex_face_;
+  Vec3 center_ = Vec3::Zero();
+  double box_scale_ = 1;
   std::vector<uint32_t> leaf_begin_, leaf_end_;  // [node]
   std::vector<int32_t> parent_;                  // [node]
   std::vector<VertexIndex> contracted_into_;     // [vertex]

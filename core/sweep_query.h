@@ -65,13 +65,16 @@ class QueryStream {
 
  private:
   struct FrontEntry {
-    double key;       // lower bound of the entry's subtree
-    ChildRef ref;     // node, leaf block, or a single face (see .cpp)
-    uint32_t lane;
+    double key;       // lower bound of the entry's subtree (exact distance for a face)
+    ChildRef ref;     // node or leaf block; for a face (lane < 8) its triangle index
+    uint32_t lane;    // 8 for a node or leaf block
+  };
+  struct StackEntry {
+    ChildRef ref;     // node or leaf block
+    float bound;      // squared box distance in the hierarchy's scaled units
   };
   std::shared_ptr<const Hierarchy> hierarchy_;
-  std::vector<ChildRef> stack_;
-  std::vector<float> stack_dist_;
+  std::vector<StackEntry> stack_;
   std::vector<FrontEntry> heap_;
   QueryCounters counters_;
 };
