@@ -1,7 +1,13 @@
 // Invariant checks of the hierarchy (DESIGN.md section 1), used by the tests.
 #include "core/hierarchy.h"
 
+#include <tbb/blocked_range.h>
+#include <tbb/enumerable_thread_specific.h>
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
 #include <cmath>
+#include <limits>
 #include <sstream>
 
 namespace meshsweeper {
@@ -14,6 +20,109 @@ std::string describe(const char* what, size_t node, int slot) {
 }
 
 }  // namespace
+
+float boxMargin(double extent) {
+  return static_cast<float>(std::max(1.0, extent) * std::ldexp(1.0, -19));
+}
+
+void refitBounds(const Hierarchy& h, const Vec3* positions, std::vector<Node8>& nodes, bool radii) {
+  const Mesh& mesh = h.mesh();
+  const auto& lanes = h.leafTriangles();
+  const double scale = h.boxScale();
+  const float inf = std::numeric_limits<float>::infinity();
+  // Leaf slots from their faces, then inner slots from their child's slots, children first
+  // (a child node always has a larger index than its parent).
+  double extent = 0;
+  for (size_t v = 0; v < mesh.positions.size(); ++v)
+    extent = std::max(extent, ((positions[v] - h.center()) * scale).cwiseAbs().maxCoeff());
+  const float margin = boxMargin(extent);
+  for (size_t node = nodes.size(); node-- > 0;) {
+    Node8& n = nodes[node];
+    for (int k = 0; k < 8; ++k) {
+      const ChildRef c = n.child[k];
+      if (c == kEmptyChild) continue;
+      float lo[3] = {inf, inf, inf}, hi[3] = {-inf, -inf, -inf};
+      if (isLeafRef(c)) {
+        const int32_t leaf = leafIndex(c);
+        for (uint32_t lane = 0; lane < h.leafLanes(leaf); ++lane) {
+          for (VertexIndex v : mesh.triangles[lanes[8 * leaf + lane]]) {
+            const Vec3 x = (positions[v] - h.center()) * scale;
+            for (int axis = 0; axis < 3; ++axis) {
+              lo[axis] = std::min(lo[axis], std::nextafter(static_cast<float>(x[axis]), -inf) - margin);
+              hi[axis] = std::max(hi[axis], std::nextafter(static_cast<float>(x[axis]), inf) + margin);
+            }
+          }
+        }
+      } else {
+        const Node8& child = nodes[c];
+        for (int j = 0; j < 8; ++j) {
+          if (child.child[j] == kEmptyChild) continue;
+          for (int axis = 0; axis < 3; ++axis) {
+            lo[axis] = std::min(lo[axis], child.lower[axis][j]);
+            hi[axis] = std::max(hi[axis], child.upper[axis][j]);
+          }
+        }
+      }
+      for (int axis = 0; axis < 3; ++axis) {
+        n.lower[axis][k] = lo[axis];
+        n.upper[axis][k] = hi[axis];
+      }
+    }
+  }
+  if (!radii) return;
+  // Each vertex is shared by about six faces: evaluate each subtree vertex once per slot
+  // (a per-task stamp array marks the vertices already seen).
+  const size_t vertex_count = mesh.positions.size();
+  struct Stamps {
+    std::vector<uint32_t> seen;  // [vertex] the clock value of the last slot that saw it
+    uint32_t clock = 0;
+  };
+  tbb::enumerable_thread_specific<Stamps> per_thread;
+  tbb::parallel_for(tbb::blocked_range<size_t>(0, nodes.size(), 16), [&](const tbb::blocked_range<size_t>& range) {
+    Stamps& stamps = per_thread.local();
+    if (stamps.seen.size() != vertex_count) stamps.seen.assign(vertex_count, 0);
+    std::vector<uint32_t>& stamp = stamps.seen;
+    uint32_t& clock = stamps.clock;
+    for (size_t node = range.begin(); node < range.end(); ++node) {
+      Node8& n = nodes[node];
+      for (int k = 0; k < 8; ++k) {
+        const ChildRef child = n.child[k];
+        if (child == kEmptyChild) continue;
+        const Vec3& a = positions[n.corner[0][k]];
+        const Vec3& b = positions[n.corner[1][k]];
+        const Vec3& c = positions[n.corner[2][k]];
+        uint32_t first, last;
+        if (isLeafRef(child)) { first = leafIndex(child); last = first + 1; }
+        else { first = h.leafBegin(child); last = h.leafEnd(child); }
+        ++clock;
+        double worst = 0;
+        for (uint32_t leaf = first; leaf < last; ++leaf) {
+          for (uint32_t lane = 0; lane < h.leafLanes(leaf); ++lane) {
+            for (VertexIndex v : mesh.triangles[lanes[8 * leaf + lane]]) {
+              if (stamp[v] == clock) continue;
+              stamp[v] = clock;
+              worst = std::max(worst, squaredDistanceToTriangle(positions[v], a, b, c));
+            }
+          }
+        }
+        // Rounded up, with a relative margin for the rounding of the distance computation.
+        const float eps = static_cast<float>(std::sqrt(worst) * (1 + 1e-9));
+        n.eps[k] = std::nextafter(eps, inf);
+      }
+    }
+  });
+}
+
+TreeGeometry Hierarchy::restGeometry() const {
+  TreeGeometry g;
+  g.nodes = nodes_.data();
+  g.leaf_blocks = leaf_blocks_.data();
+  g.positions = mesh_.positions.data();
+  g.center = center_;
+  g.box_scale = box_scale_;
+  g.version = 0;
+  return g;
+}
 
 std::string validate(const Hierarchy& h) {
   const Mesh& mesh = h.mesh();
@@ -73,9 +182,17 @@ std::string validate(const Hierarchy& h) {
     if (leaf_refs[leaf] != 1) return "leaf " + std::to_string(leaf) + " is not referenced once";
   if (h.leafBegin(0) != 0 || h.leafEnd(0) != blocks.size()) return "root does not span all leaves";
 
+  return validateGeometry(h, h.restGeometry());
+}
+
+std::string validateGeometry(const Hierarchy& h, const TreeGeometry& g) {
+  const Mesh& mesh = h.mesh();
+  const auto& lanes = h.leafTriangles();
+  const Node8* nodes = g.nodes;
+  const Vec3* positions = g.positions;
   // Bounds: every slot's box holds its subtree's vertices, and eps bounds their distance to
   // the slot's triangle.
-  for (size_t node = 0; node < nodes.size(); ++node) {
+  for (size_t node = 0; node < h.nodes().size(); ++node) {
     const Node8& n = nodes[node];
     for (int k = 0; k < 8; ++k) {
       const ChildRef c = n.child[k];
@@ -85,14 +202,14 @@ std::string validate(const Hierarchy& h) {
       else { first = h.leafBegin(c); last = h.leafEnd(c); }
       for (int corner = 0; corner < 3; ++corner)
         if (n.corner[corner][k] >= mesh.positions.size()) return describe("corner out of range", node, k);
-      const Vec3& a = mesh.positions[n.corner[0][k]];
-      const Vec3& b = mesh.positions[n.corner[1][k]];
-      const Vec3& cc = mesh.positions[n.corner[2][k]];
+      const Vec3& a = positions[n.corner[0][k]];
+      const Vec3& b = positions[n.corner[1][k]];
+      const Vec3& cc = positions[n.corner[2][k]];
       for (uint32_t leaf = first; leaf < last; ++leaf) {
         for (uint32_t lane = 0; lane < h.leafLanes(leaf); ++lane) {
           for (VertexIndex v : mesh.triangles[lanes[8 * leaf + lane]]) {
-            const Vec3& x = mesh.positions[v];
-            const Vec3 scaled = (x - h.center()) * h.boxScale();
+            const Vec3& x = positions[v];
+            const Vec3 scaled = (x - g.center) * g.box_scale;
             for (int axis = 0; axis < 3; ++axis) {
               if (!(n.lower[axis][k] <= scaled[axis] && scaled[axis] <= n.upper[axis][k]))
                 return describe("box misses a subtree vertex", node, k);

@@ -29,8 +29,8 @@ inline bool isLeafRef(ChildRef c) { return c < 0 && c != kEmptyChild; }
 inline int32_t leafIndex(ChildRef c) { return ~c; }
 inline ChildRef leafRef(int32_t leaf) { return ~leaf; }
 
-// Eight children of one node, structure of arrays, one cache-aligned block per node.
-struct alignas(64) Node8 {
+// Eight children of one node, structure of arrays (352 bytes; 32-byte aligned for AVX loads).
+struct alignas(32) Node8 {
   float lower[3][8];            // [axis][slot] subtree box, rounded down
   float upper[3][8];            // [axis][slot] subtree box, rounded up (empty slot: lower > upper)
   ChildRef child[8];            // [slot]
@@ -38,6 +38,18 @@ struct alignas(64) Node8 {
   VertexIndex corner[3][8];     // [corner][slot] the slot's triangle (original vertex indices)
 };
 
+
+// The geometry a query reads, over a Hierarchy's fixed topology (children, leaf lanes). The
+// Hierarchy provides its rest geometry; deform/ bodies provide per-frame geometry (moved
+// positions, refreshed or inflated bounds) with the same node and leaf layout.
+struct TreeGeometry {
+  const Node8* nodes = nullptr;                // [node] boxes, eps, children, slot triangles
+  const TriangleBlock8* leaf_blocks = nullptr;  // [leaf] inline faces; null: gather from positions
+  const Vec3* positions = nullptr;             // [vertex]
+  Vec3 center = Vec3::Zero();                  // boxes hold (x - center) * box_scale in float
+  double box_scale = 1;
+  uint64_t version = 0;                        // changes whenever the geometry changes
+};
 
 struct BuildOptions {
   // Stop contracting when this many triangles remain (the base mesh; its triangles are roots).
@@ -64,6 +76,8 @@ class Hierarchy {
   static std::shared_ptr<const Hierarchy> build(const Mesh& mesh, const BuildOptions& options = {});
 
   const Mesh& mesh() const { return mesh_; }
+  // The rest geometry: the mesh as given, boxes and radii as built.
+  TreeGeometry restGeometry() const;
   const HierarchyStats& stats() const { return stats_; }
 
   // The query tree. nodes()[0] is the root node; a mesh of at most 8 faces has a root with one
@@ -76,6 +90,7 @@ class Hierarchy {
   uint32_t leafCount() const { return static_cast<uint32_t>(leaf_blocks_.size()); }
   // Used lanes of a leaf block (1..8); used lanes come first.
   uint32_t leafLanes(int32_t leaf) const { return leaf_lanes_[leaf]; }
+  const std::vector<uint8_t>& leafLaneCounts() const { return leaf_lanes_; }
 
   // Node boxes are stored in float as (x - center()) * boxScale(), boxScale() a power of two
   // that maps the mesh into [-1, 1]; they are rounded outward and widened by a margin so that
@@ -86,9 +101,9 @@ class Hierarchy {
   const std::vector<TriangleIndex>& vertexFace() const { return vertex_face_; }
 
   // Contraction record: [vertex] the vertex it was contracted into (kInvalidIndex for base
-  // vertices and vertices no triangle uses), and the contraction radius r_v at that moment.
+  // vertices and vertices no triangle uses). The contraction radii (r_u <- max(r_u, r_v + |u-v|))
+  // order the contractions during the build; queries use the tighter per-node eps instead.
   const std::vector<VertexIndex>& contractedInto() const { return contracted_into_; }
-  const std::vector<float>& contractionRadius() const { return contraction_radius_; }
 
   // For an inner node: the range of leaf blocks of its subtree ([first, last) in leafBlocks()).
   // Leaves are laid out depth-first, so every subtree is a contiguous range.
@@ -111,8 +126,24 @@ class Hierarchy {
   std::vector<uint32_t> leaf_begin_, leaf_end_;  // [node]
   std::vector<int32_t> parent_;                  // [node]
   std::vector<VertexIndex> contracted_into_;     // [vertex]
-  std::vector<float> contraction_radius_;        // [vertex]
 };
+
+// Recomputes slot bounds over the hierarchy's topology for other vertex positions (a moved or
+// deformed copy of the mesh): `nodes` must be a copy of h.nodes(); every slot's box (scaled
+// with h.center() and h.boxScale(), rounded outward with a margin) and, if `radii`, its eps
+// (max distance of its subtree's vertices to its triangle, at these positions) are rewritten.
+// positions: [vertex], as many as the mesh has. Boxes: one bottom-up pass; radii: exact, the
+// cost of the build's radius phase.
+void refitBounds(const Hierarchy& h, const Vec3* positions, std::vector<Node8>& nodes, bool radii);
+
+// The float margin that covers query-point rounding for boxes whose scaled coordinates reach
+// `extent` in magnitude (see Hierarchy::boxScale()).
+float boxMargin(double extent);
+
+// Checks that the bounds of `geometry` (over h's layout) hold for its positions: every slot's
+// box contains its subtree's vertices and every eps bounds their distance to the slot's
+// triangle. Returns an empty string when valid, else the first violation.
+std::string validateGeometry(const Hierarchy& h, const TreeGeometry& geometry);
 
 // Checks the hierarchy's invariants: every original face appears in exactly one leaf lane;
 // every slot's box contains its subtree's vertices; every slot's eps bounds the distance from

@@ -19,8 +19,6 @@
 //     eps = max over its subtree's vertices of their distance to the slot's triangle.
 #include "core/hierarchy.h"
 
-#include <tbb/parallel_for.h>
-
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -75,8 +73,7 @@ class Contractor {
   Contractor(const Mesh& mesh, uint32_t base_triangles)
       : mesh_(mesh), base_triangles_(std::max<uint32_t>(base_triangles, 1)) {}
 
-  void run(CoverTree& tree, std::vector<VertexIndex>& contracted_into,
-           std::vector<float>& contraction_radius, HierarchyStats& stats);
+  void run(CoverTree& tree, std::vector<VertexIndex>& contracted_into, HierarchyStats& stats);
 
  private:
   struct Candidate {
@@ -135,7 +132,8 @@ class Contractor {
   std::vector<double> radius_;      // [vertex] contraction radius r
   std::vector<int32_t> holder_;     // [slot] cover-tree node carrying the slot's faces
   std::vector<uint8_t> open_;       // [slot] holder_ was created since the corners last changed
-  std::vector<VertexIndex> neighbours_;
+  std::vector<VertexIndex> neighbours_;                 // sorted by index
+  std::vector<std::pair<double, VertexIndex>> ranked_;  // (squared distance, neighbour)
   std::vector<Deletion> deletions_;
   size_t live_triangles_ = 0;
 };
@@ -205,7 +203,7 @@ void Contractor::apply(VertexIndex v, VertexIndex u, const std::vector<Deletion>
 }
 
 void Contractor::run(CoverTree& tree, std::vector<VertexIndex>& contracted_into,
-                     std::vector<float>& contraction_radius, HierarchyStats& stats) {
+                     HierarchyStats& stats) {
   tree_ = &tree;
   const size_t n = mesh_.positions.size();
   const size_t m = mesh_.triangles.size();
@@ -219,7 +217,6 @@ void Contractor::run(CoverTree& tree, std::vector<VertexIndex>& contracted_into,
   tree.parent.assign(m, -1);
   tree.corners.assign(mesh_.triangles.begin(), mesh_.triangles.end());
   contracted_into.assign(n, kNone);
-  contraction_radius.assign(n, 0.0f);
   live_triangles_ = m;
   for (size_t t = m; t-- > 0;) {
     holder_[t] = static_cast<int32_t>(t);
@@ -283,13 +280,13 @@ void Contractor::run(CoverTree& tree, std::vector<VertexIndex>& contracted_into,
       });
       std::sort(neighbours_.begin(), neighbours_.end());
       neighbours_.erase(std::unique(neighbours_.begin(), neighbours_.end()), neighbours_.end());
-      std::sort(neighbours_.begin(), neighbours_.end(), [&](VertexIndex a, VertexIndex b) {
-        return (mesh_.positions[a] - pv).squaredNorm() < (mesh_.positions[b] - pv).squaredNorm();
-      });
+      ranked_.clear();
+      for (VertexIndex u : neighbours_) ranked_.emplace_back((mesh_.positions[u] - pv).squaredNorm(), u);
+      std::sort(ranked_.begin(), ranked_.end());
       VertexIndex target = kNone;
-      for (size_t j = 0; j < neighbours_.size() && j < 4; ++j) {
-        if (findDeletions(v, neighbours_[j], deletions_)) {
-          target = neighbours_[j];
+      for (size_t j = 0; j < ranked_.size() && j < 4; ++j) {
+        if (findDeletions(v, ranked_[j].second, deletions_)) {
+          target = ranked_[j].second;
           break;
         }
       }
@@ -298,8 +295,7 @@ void Contractor::run(CoverTree& tree, std::vector<VertexIndex>& contracted_into,
         double best = std::numeric_limits<double>::infinity();
         for (size_t j = (i >= 2 ? i - 2 : 0); j <= i + 2 && j < active.size(); ++j) {
           const VertexIndex w = active[j];
-          if (w == v || std::find(neighbours_.begin(), neighbours_.end(), w) != neighbours_.end())
-            continue;
+          if (w == v || std::binary_search(neighbours_.begin(), neighbours_.end(), w)) continue;
           const double d = (mesh_.positions[w] - pv).squaredNorm();
           if (d < best) { best = d; target = w; }
         }
@@ -322,7 +318,6 @@ void Contractor::run(CoverTree& tree, std::vector<VertexIndex>& contracted_into,
       forEachCorner(cand.v, [&](uint32_t c) {
         for (int k = 0; k < 3; ++k) locked[tri_[3 * (c / 3) + k]] = 1;
       });
-      contraction_radius[cand.v] = static_cast<float>(cand.cost);
       contracted_into[cand.v] = cand.u;
       apply(cand.v, cand.u, deletions_);
       ++applied;
@@ -468,13 +463,13 @@ void HierarchyBuilder::setSlot(Node8& node, int k, ChildRef child, const Triangl
                                const Box& box) const {
   // Scaled float coordinates, rounded outward, widened by a margin that covers the rounding
   // of a query point to float (DESIGN.md section 1: conservative float boxes).
-  constexpr float kMargin = 1.0f / (1 << 19);
+  const float margin = boxMargin(1.0);
   const float inf = std::numeric_limits<float>::infinity();
   for (int axis = 0; axis < 3; ++axis) {
     const float lo = static_cast<float>((box.lower[axis] - h_.center_[axis]) * h_.box_scale_);
     const float hi = static_cast<float>((box.upper[axis] - h_.center_[axis]) * h_.box_scale_);
-    node.lower[axis][k] = std::nextafter(lo, -inf) - kMargin;
-    node.upper[axis][k] = std::nextafter(hi, inf) + kMargin;
+    node.lower[axis][k] = std::nextafter(lo, -inf) - margin;
+    node.upper[axis][k] = std::nextafter(hi, inf) + margin;
   }
   node.child[k] = child;
   for (int c = 0; c < 3; ++c) node.corner[c][k] = corners[c];
@@ -572,7 +567,8 @@ void HierarchyBuilder::collapse() {
   }
 }
 
-// eps of every slot: the largest distance from its subtree's original vertices to its triangle.
+// Leaf ranges of every node, then every slot's bounds: the box of its subtree's vertices and eps,
+// the largest distance from them to the slot's triangle.
 void HierarchyBuilder::computeRadii() {
   const size_t count = h_.nodes_.size();
   h_.leaf_end_.assign(count, 0);
@@ -585,37 +581,14 @@ void HierarchyBuilder::computeRadii() {
     }
     h_.leaf_end_[node] = end;
   }
-  tbb::parallel_for(size_t(0), count, [&](size_t node) {
-    Node8& n = h_.nodes_[node];
-    for (int k = 0; k < 8; ++k) {
-      const ChildRef child = n.child[k];
-      if (child == kEmptyChild) continue;
-      const Vec3& a = mesh_.positions[n.corner[0][k]];
-      const Vec3& b = mesh_.positions[n.corner[1][k]];
-      const Vec3& c = mesh_.positions[n.corner[2][k]];
-      uint32_t first, last;
-      if (isLeafRef(child)) { first = leafIndex(child); last = first + 1; }
-      else { first = h_.leaf_begin_[child]; last = h_.leaf_end_[child]; }
-      double worst = 0;
-      for (uint32_t leaf = first; leaf < last; ++leaf) {
-        for (uint32_t lane = 0; lane < h_.leaf_lanes_[leaf]; ++lane) {
-          const Triangle& face = mesh_.triangles[h_.leaf_triangles_[8 * leaf + lane]];
-          for (VertexIndex v : face)
-            worst = std::max(worst, squaredDistanceToTriangle(mesh_.positions[v], a, b, c));
-        }
-      }
-      // Rounded up, with a relative margin for the rounding of the distance computation.
-      const float eps = static_cast<float>(std::sqrt(worst) * (1 + 1e-9));
-      n.eps[k] = std::nextafter(eps, std::numeric_limits<float>::infinity());
-    }
-  });
+  refitBounds(h_, mesh_.positions.data(), h_.nodes_, true);
 }
 
 void HierarchyBuilder::run(const BuildOptions& options) {
   const auto start = Clock::now();
   HierarchyStats& stats = h_.stats_;
   Contractor(mesh_, options.base_triangles)
-      .run(tree_, h_.contracted_into_, h_.contraction_radius_, stats);
+      .run(tree_, h_.contracted_into_, stats);
   stats.contract_seconds = secondsSince(start);
 
   const auto tree_start = Clock::now();
@@ -654,7 +627,7 @@ void HierarchyBuilder::run(const BuildOptions& options) {
   stats.total_seconds = secondsSince(start);
   stats.fixed_bytes = h_.nodes_.size() * (sizeof(Node8) + 3 * sizeof(uint32_t)) +
                       h_.leaf_blocks_.size() * (sizeof(TriangleBlock8) + 8 * sizeof(TriangleIndex) + 1) +
-                      mesh_.positions.size() * (sizeof(Vec3) + 2 * sizeof(uint32_t) + sizeof(float)) +
+                      mesh_.positions.size() * (sizeof(Vec3) + 2 * sizeof(uint32_t)) +
                       mesh_.triangles.size() * sizeof(Triangle);
 }
 

@@ -1,2 +1,921 @@
-// Placeholder: implemented by the core issue.
+// Reading meshes and point lists (core/mesh_io.h).
+//
+// Meshes are read by CGAL 5.5's polygon-soup readers, which keep the file's vertex and face order.
+// Those readers trust their input, so every file is checked before CGAL sees it:
+//
+//   OFF  The header is parsed here and its counts compared with the file size (CGAL resizes its
+//        arrays to the header counts). Binary OFF is refused: CGAL 5.5's soup reader ignores the
+//        per-face colour count of binary OFF and misreads every face after the first.
+//   PLY  The header is parsed and the body walked without storing anything: element counts
+//        against the file size, every list length against the bytes left (CGAL resizes to it),
+//        and the property types CGAL can read (a vertex 'x' declared 'int' makes CGAL 5.5
+//        dereference a null pointer; an unknown type makes it misread the rest of the file).
+//   STL  A binary file's triangle count is compared with the file size and its coordinates must
+//        be finite (CGAL merges equal points through a std::map, where NaN compares equal to
+//        anything).
+//   OBJ  Nothing to check ahead: CGAL grows its arrays while it reads.
+// CGAL's readers only say true or false; when they say false for an OFF or OBJ file, the file is
+// scanned again here to name the line and the problem.
+//
+// Polygons are handed to CGAL as Corners, whose resize() refuses absurd corner counts (an OFF
+// face line "1000000000 0 1 2" would otherwise allocate 8 GB before the line is found short).
+// After CGAL: polygons with fewer than 3 corners and out-of-range indices are refused (CGAL's OBJ
+// reader lets index n+1 through), polygons are fan-triangulated, and checkMesh() has the last
+// word.
 #include "core/mesh_io.h"
+
+#include <CGAL/IO/OBJ.h>
+#include <CGAL/IO/OFF.h>
+#include <CGAL/IO/PLY.h>
+#include <CGAL/IO/STL.h>
+#include <CGAL/Simple_cartesian.h>
+
+#include <algorithm>
+#include <cctype>
+#include <cerrno>
+#include <charconv>
+#include <cmath>
+#include <cstdint>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <iostream>
+#include <limits>
+#include <locale>
+#include <new>
+#include <sstream>
+#include <string_view>
+
+namespace meshsweeper {
+namespace {
+
+using Kernel = CGAL::Simple_cartesian<double>;
+using CgalPoint = Kernel::Point_3;
+
+// Largest polygon accepted (8 MB of indices); a face line claiming more is refused before
+// anything is allocated for it.
+constexpr std::size_t kMaxPolygonCorners = std::size_t(1) << 20;
+// Largest PLY header looked at before giving up, in bytes.
+constexpr std::size_t kMaxPlyHeaderBytes = std::size_t(1) << 20;
+// Smallest ASCII OFF vertex line ("0 0 0\n") and face line ("3 0 1 2" + newline, minus slack).
+constexpr std::uint64_t kMinOffVertexBytes = 6;
+constexpr std::uint64_t kMinOffFaceBytes = 6;
+
+enum class Format { kOff, kObj, kPly, kStl };
+
+[[noreturn]] void fail(const std::string& path, const std::string& problem) {
+  throw MeshError(path + ": " + problem);
+}
+
+// "1 face", "2 faces", "2 vertices", "2 indices".
+std::string plural(std::uint64_t n, const std::string& word) {
+  if (n == 1) return "1 " + word;
+  if (word == "vertex") return std::to_string(n) + " vertices";
+  if (word == "index") return std::to_string(n) + " indices";
+  return std::to_string(n) + " " + word + "s";
+}
+
+// Thrown by Corners::resize through CGAL's reader; turned into a MeshError by readMesh.
+struct TooManyCorners {
+  std::size_t count;
+};
+
+// A polygon as CGAL fills it: a vector of vertex indices whose resize() refuses absurd counts.
+class Corners : public std::vector<std::size_t> {
+ public:
+  void resize(std::size_t n) {
+    if (n > kMaxPolygonCorners) throw TooManyCorners{n};
+    std::vector<std::size_t>::resize(n);
+  }
+};
+
+// ---------------------------------------------------------------------------------------------
+// Small parsing helpers.
+
+bool isBlank(char c) { return c == ' ' || c == '\t' || c == '\r' || c == '\v' || c == '\f'; }
+
+std::vector<std::string_view> splitWords(std::string_view line) {
+  std::vector<std::string_view> words;
+  std::size_t i = 0;
+  while (i < line.size()) {
+    while (i < line.size() && (isBlank(line[i]) || line[i] == '\n')) ++i;
+    const std::size_t begin = i;
+    while (i < line.size() && !isBlank(line[i]) && line[i] != '\n') ++i;
+    if (i > begin) words.push_back(line.substr(begin, i - begin));
+  }
+  return words;
+}
+
+enum class NumberStatus { kOk, kNotANumber, kNonFinite };
+
+// Parses a whole word as a double, locale-independently. Accepts a leading '+'; a value too small
+// for a double becomes 0 (or a denormal); overflow, "inf" and "nan" give kNonFinite.
+NumberStatus parseDouble(std::string_view word, double& value) {
+  if (word.size() > 1 && word[0] == '+' && word[1] != '-' && word[1] != '+') word.remove_prefix(1);
+  const char* end = word.data() + word.size();
+  auto [ptr, ec] = std::from_chars(word.data(), end, value);
+  if (ec == std::errc::result_out_of_range && ptr == end) {
+    // Overflow or underflow: the classic-locale stream tells them apart (it fails on overflow).
+    std::istringstream stream{std::string(word)};
+    stream.imbue(std::locale::classic());
+    double v = 0;
+    if (!(stream >> v)) return NumberStatus::kNonFinite;
+    value = v;
+    return NumberStatus::kOk;
+  }
+  if (ec != std::errc() || ptr != end) return NumberStatus::kNotANumber;
+  return std::isfinite(value) ? NumberStatus::kOk : NumberStatus::kNonFinite;
+}
+
+// Parses a whole word as a decimal integer (optional sign).
+bool parseInteger(std::string_view word, std::int64_t& value) {
+  if (word.size() > 1 && word[0] == '+' && word[1] != '-' && word[1] != '+') word.remove_prefix(1);
+  const char* end = word.data() + word.size();
+  auto [ptr, ec] = std::from_chars(word.data(), end, value);
+  return ec == std::errc() && ptr == end;
+}
+
+std::string shown(std::string_view word) {
+  constexpr std::size_t kShown = 40;
+  std::string s(word.substr(0, kShown));
+  for (char& c : s)
+    if (!std::isprint(static_cast<unsigned char>(c))) c = '?';
+  return "'" + s + (word.size() > kShown ? "...'" : "'");
+}
+
+// ---------------------------------------------------------------------------------------------
+// Opening.
+
+// Opens path for binary reading and returns its size in bytes. Throws MeshError for a missing,
+// unreadable or empty file, a directory or a special file (a FIFO could block forever).
+std::uint64_t openInput(const std::string& path, std::ifstream& in) {
+  namespace fs = std::filesystem;
+  std::error_code ec;
+  const fs::file_status status = fs::status(path, ec);
+  if (status.type() == fs::file_type::not_found) fail(path, "no such file");
+  if (ec) fail(path, "cannot access the file (" + ec.message() + ")");
+  if (status.type() == fs::file_type::directory) fail(path, "is a directory, not a file");
+  if (status.type() != fs::file_type::regular) fail(path, "not a regular file");
+  const std::uintmax_t size = fs::file_size(path, ec);
+  if (ec) fail(path, "cannot read the file size (" + ec.message() + ")");
+  errno = 0;
+  in.open(path, std::ios::in | std::ios::binary);
+  if (!in.is_open())
+    fail(path, std::string("cannot open the file (") +
+                   (errno != 0 ? std::strerror(errno) : "unknown reason") + ")");
+  if (size == 0) fail(path, "the file is empty");
+  return size;
+}
+
+Format formatOf(const std::string& path) {
+  const std::string ext_raw = std::filesystem::path(path).extension().string();
+  std::string ext;
+  for (char c : ext_raw) ext += static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+  if (ext == ".off") return Format::kOff;
+  if (ext == ".obj") return Format::kObj;
+  if (ext == ".ply") return Format::kPly;
+  if (ext == ".stl") return Format::kStl;
+  fail(path, (ext.empty() ? std::string("no file extension") : "unknown extension " + shown(ext)) +
+                 " (expected .off, .obj, .ply or .stl)");
+}
+
+// ---------------------------------------------------------------------------------------------
+// OFF.
+
+struct OffHeader {
+  std::uint64_t vertices = 0;
+  std::uint64_t faces = 0;
+  std::uint64_t body_offset = 0;  // bytes before the first vertex line
+};
+
+// Skips whitespace and whole '#' comments, as CGAL's skip_comment_OFF does.
+void skipOffSpaceAndComments(std::istream& in) {
+  int c;
+  while ((c = in.peek()) != EOF) {
+    if (c == '#') {
+      while ((c = in.get()) != EOF && c != '\n') {}
+    } else if (std::isspace(c)) {
+      in.get();
+    } else {
+      break;
+    }
+  }
+}
+
+std::string readOffWord(std::istream& in, std::size_t max_chars) {
+  std::string word;
+  int c;
+  while (word.size() < max_chars && (c = in.peek()) != EOF && std::isalnum(c))
+    word += static_cast<char>(in.get());
+  return word;
+}
+
+// Reads a non-negative header count; false when the next word is not one.
+bool readOffCount(std::istream& in, std::uint64_t& count) {
+  const std::string digits = readOffWord(in, 32);
+  if (digits.empty() || digits.size() > 18) return false;
+  for (char c : digits)
+    if (!std::isdigit(static_cast<unsigned char>(c))) return false;
+  count = std::stoull(digits);
+  return true;
+}
+
+// Parses the OFF header the way CGAL's File_header_OFF does and checks its counts against the
+// file size. Throws MeshError.
+OffHeader checkOffHeader(const std::string& path, std::istream& in, std::uint64_t file_size) {
+  skipOffSpaceAndComments(in);
+  const std::string keyword = readOffWord(in, 16);
+  // CGAL's keyword grammar: [ST][C][N][4][n]OFF, or SKEL.
+  std::size_t j = 0;
+  if (keyword.compare(j, 2, "ST") == 0) j += 2;
+  if (j < keyword.size() && keyword[j] == 'C') ++j;
+  if (j < keyword.size() && keyword[j] == 'N') ++j;
+  if (j < keyword.size() && keyword[j] == '4') ++j;
+  const bool n_dimensional = j < keyword.size() && keyword[j] == 'n';
+  if (n_dimensional) ++j;
+  if (keyword.substr(j) != "OFF") {
+    if (keyword.size() >= 4 && keyword.substr(keyword.size() - 4) == "SKEL")
+      fail(path, "a SKEL file has no faces, expected an OFF mesh");
+    fail(path, "not an OFF file (the header does not start with 'OFF')");
+  }
+  if (n_dimensional) fail(path, "n-dimensional OFF (" + keyword + ") is not supported");
+
+  skipOffSpaceAndComments(in);
+  OffHeader header;
+  if (std::isalpha(in.peek())) {
+    if (readOffWord(in, 16) == "BINARY")
+      fail(path, "binary OFF is not supported (CGAL 5.5 misreads its faces); convert it to ASCII "
+                 "OFF or PLY");
+    fail(path, "the OFF header has no vertex count");
+  }
+  if (!readOffCount(in, header.vertices)) fail(path, "the OFF header has no valid vertex count");
+  skipOffSpaceAndComments(in);
+  if (!readOffCount(in, header.faces)) fail(path, "the OFF header has no valid face count");
+  // CGAL reads the edge count wherever it is, so a header without one swallows the first
+  // coordinate; insist that it follows on the same line.
+  while (isBlank(static_cast<char>(in.peek()))) in.get();
+  std::uint64_t edges = 0;
+  if (!readOffCount(in, edges))
+    fail(path, "the OFF header line with the vertex and face counts has no edge count (write "
+               "'" + std::to_string(header.vertices) + " " + std::to_string(header.faces) +
+               " 0')");
+  int c;
+  while ((c = in.get()) != EOF && c != '\n') {}
+  if (!in && !in.eof()) fail(path, "read error in the OFF header");
+  in.clear();
+  const std::streamoff position = in.tellg();
+  header.body_offset = position < 0 ? file_size : static_cast<std::uint64_t>(position);
+
+  if (header.faces == 0) fail(path, "the OFF header declares no faces");
+  if (header.vertices == 0) fail(path, "the OFF header declares no vertices");
+  const std::uint64_t body = file_size - std::min(file_size, header.body_offset);
+  // Counts have at most 18 digits, so 6 * (vertices + faces) < 1.2e19 cannot overflow.
+  if (header.vertices > body || header.faces > body ||
+      kMinOffVertexBytes * header.vertices + kMinOffFaceBytes * header.faces > body + 1) {
+    fail(path, "the OFF header declares " + plural(header.vertices, "vertex") + " and " +
+                   plural(header.faces, "face") + ", which need at least " +
+                   std::to_string(kMinOffVertexBytes * header.vertices +
+                                  kMinOffFaceBytes * header.faces) +
+                   " bytes, but only " + std::to_string(body) +
+                   " bytes follow the header (truncated file or wrong counts)");
+  }
+  return header;
+}
+
+// Reads the next line that is not blank and not a whole-line comment, without its '#' comment.
+// Returns false at the end of the file.
+bool nextOffLine(std::istream& in, std::string& line, std::uint64_t& line_number) {
+  while (std::getline(in, line)) {
+    ++line_number;
+    const std::size_t hash = line.find('#');
+    if (hash != std::string::npos) line.resize(hash);
+    if (!splitWords(line).empty()) return true;
+  }
+  return false;
+}
+
+// Called when CGAL rejected an ASCII OFF file whose header was fine: finds the first line that is
+// wrong and says why. Returns an empty string when nothing is found.
+std::string diagnoseOffBody(std::istream& in, const OffHeader& header) {
+  in.clear();
+  in.seekg(0);
+  std::string line;
+  std::uint64_t line_number = 0;
+  // Skip to the header's end by line counting: the body starts after the line holding it.
+  while (static_cast<std::uint64_t>(in.tellg()) < header.body_offset && std::getline(in, line))
+    ++line_number;
+  for (std::uint64_t v = 0; v < header.vertices; ++v) {
+    if (!nextOffLine(in, line, line_number))
+      return "the file ends after " + plural(v, "vertex") + " of the " +
+             std::to_string(header.vertices) + " declared";
+    const auto words = splitWords(line);
+    std::size_t numbers = 0;
+    for (std::string_view w : words) {
+      double value;
+      if (parseDouble(w, value) != NumberStatus::kOk) {
+        if (numbers >= 3) break;  // CGAL stops at the first word that is not a number
+        return "line " + std::to_string(line_number) + ": vertex " + std::to_string(v) + ": " +
+               shown(w) + " is not a finite number";
+      }
+      ++numbers;
+    }
+    if (numbers < 3)
+      return "line " + std::to_string(line_number) + ": vertex " + std::to_string(v) +
+             " has fewer than 3 coordinates";
+  }
+  for (std::uint64_t f = 0; f < header.faces; ++f) {
+    if (!nextOffLine(in, line, line_number))
+      return "the file ends after " + plural(f, "face") + " of the " +
+             std::to_string(header.faces) + " declared";
+    const auto words = splitWords(line);
+    const std::string where = "line " + std::to_string(line_number) + ": face " +
+                              std::to_string(f);
+    std::int64_t corners = 0;
+    if (!parseInteger(words[0], corners) || corners < 0)
+      return where + ": " + shown(words[0]) + " is not a corner count";
+    if (static_cast<std::uint64_t>(corners) + 1 > words.size())
+      return where + " declares " + std::to_string(corners) + " corners but lists " +
+             plural(words.size() - 1, "index");
+    for (std::int64_t k = 1; k <= corners; ++k) {
+      double value;
+      if (parseDouble(words[k], value) != NumberStatus::kOk)
+        return where + ": index " + shown(words[k]) + " is not a number";
+      if (value < 0 || value >= static_cast<double>(header.vertices))
+        return where + " uses vertex " + std::string(words[k]) + " but the file has " +
+               plural(header.vertices, "vertex");
+    }
+  }
+  return {};
+}
+
+// ---------------------------------------------------------------------------------------------
+// OBJ.
+
+// Called when CGAL rejected an OBJ file: finds the line it stopped at, the way its read_OBJ
+// reads (one statement per line; statements it does not know make it fail). Returns an empty
+// string when nothing is found.
+std::string diagnoseObj(std::istream& in) {
+  static const char* const kKnown[] = {
+      "v", "vt", "vn", "f", "vp", "bevel", "lod", "ctech", "c_interp", "usemap", "usemtl",
+      "stech", "d_interp", "mtllib", "shadow_obj", "trace_obj", "o", "g", "s", "p", "cstype",
+      "deg", "step", "bmat", "con", "curv", "curv2", "surf", "parm", "trim", "hole", "scrv", "sp",
+      "end", "surf_1", "q0_1", "q1_1", "curv2d_1", "surf_2", "q0_2", "q1_2", "curv2d_2", "bsp",
+      "bzp", "cdc", "cdp", "res"};
+  std::string line;
+  std::uint64_t vertices = 0, faces = 0;
+  // Pass 1: statements and vertices; pass 2: face indices against the vertex count.
+  for (int pass = 1; pass <= 2; ++pass) {
+    in.clear();
+    in.seekg(0);
+    std::uint64_t line_number = 0, face = 0;
+    while (std::getline(in, line)) {
+      ++line_number;
+      const auto words = splitWords(line);
+      if (words.empty() || words[0][0] == '#') continue;
+      const std::string at = "line " + std::to_string(line_number) + ": ";
+      if (pass == 2) {
+        if (words[0] != "f") continue;
+        for (std::size_t k = 1; k < words.size(); ++k) {
+          const std::string_view index = words[k].substr(0, words[k].find('/'));
+          std::int64_t i = 0;
+          if (!parseInteger(index, i))
+            return at + "face " + std::to_string(face) + ": " + shown(words[k]) +
+                   " is not a vertex index";
+          if (i == 0 || (i > 0 && static_cast<std::uint64_t>(i) > vertices) ||
+              (i < 0 && static_cast<std::uint64_t>(-i) > vertices))
+            return at + "face " + std::to_string(face) + " uses OBJ index " + std::string(index) +
+                   " but the file has " + plural(vertices, "vertex");
+        }
+        ++face;
+        continue;
+      }
+      if (std::find(std::begin(kKnown), std::end(kKnown), words[0]) == std::end(kKnown))
+        return at + "unsupported OBJ statement " + shown(words[0]);
+      if (words[0] == "f") ++faces;
+      if (words[0] != "v") continue;
+      ++vertices;
+      for (std::size_t k = 1; k <= 3; ++k) {
+        double value;
+        if (k >= words.size())
+          return at + "vertex " + std::to_string(vertices - 1) + " has fewer than 3 coordinates";
+        if (parseDouble(words[k], value) != NumberStatus::kOk)
+          return at + "vertex " + std::to_string(vertices - 1) + ": " + shown(words[k]) +
+                 " is not a finite number";
+      }
+    }
+    if (vertices == 0) return "the OBJ file has no vertices ('v' lines)";
+    if (faces == 0) return "the OBJ file has no faces ('f' lines)";
+  }
+  return {};
+}
+
+// ---------------------------------------------------------------------------------------------
+// PLY.
+
+struct PlyType {
+  int bytes = 0;  // 0: not a PLY type
+  bool integer = false;
+  bool is_signed = false;
+  bool is_float() const { return bytes != 0 && !integer; }
+};
+
+PlyType plyType(std::string_view name) {
+  if (name == "char" || name == "int8") return {1, true, true};
+  if (name == "uchar" || name == "uint8") return {1, true, false};
+  if (name == "short" || name == "int16") return {2, true, true};
+  if (name == "ushort" || name == "uint16") return {2, true, false};
+  if (name == "int" || name == "int32") return {4, true, true};
+  if (name == "uint" || name == "uint32") return {4, true, false};
+  if (name == "float" || name == "float32") return {4, false, true};
+  if (name == "double" || name == "float64") return {8, false, true};
+  return {};
+}
+
+struct PlyProperty {
+  std::string name;
+  std::string type_name;
+  PlyType type;        // scalar type, or the item type of a list
+  bool list = false;
+  PlyType count_type;  // lists only
+};
+
+struct PlyElement {
+  std::string name;
+  std::uint64_t count = 0;
+  std::vector<PlyProperty> properties;
+
+  const PlyProperty* find(std::string_view property) const {
+    for (const PlyProperty& p : properties)
+      if (p.name == property) return &p;
+    return nullptr;
+  }
+};
+
+enum class PlyFormat { kAscii, kLittleEndian, kBigEndian };
+
+struct PlyHeader {
+  PlyFormat format = PlyFormat::kAscii;
+  std::vector<PlyElement> elements;
+  std::uint64_t body_offset = 0;
+};
+
+bool isVertexElement(const std::string& name) { return name == "vertex" || name == "vertices"; }
+bool isFaceElement(const std::string& name) { return name == "face" || name == "faces"; }
+
+// Parses a PLY header and checks that CGAL 5.5's reader can read the elements it interprets.
+PlyHeader parsePlyHeader(const std::string& path, std::istream& in) {
+  PlyHeader header;
+  std::string line;
+  std::uint64_t line_number = 0;
+  bool ended = false;
+  while (!ended && std::getline(in, line)) {
+    ++line_number;
+    const std::streamoff position = in.tellg();
+    if (position < 0 || static_cast<std::uint64_t>(position) > kMaxPlyHeaderBytes)
+      fail(path, "no PLY end_header in the first " + std::to_string(kMaxPlyHeaderBytes) +
+                     " bytes");
+    const auto words = splitWords(line);
+    const std::string at = "PLY header line " + std::to_string(line_number) + ": ";
+    if (line_number == 1) {
+      if (words.size() != 1 || words[0] != "ply") fail(path, "not a PLY file (no 'ply' line)");
+      continue;
+    }
+    if (line_number == 2) {  // CGAL wants the format on the second line
+      if (words.size() != 3 || words[0] != "format") fail(path, at + "expected 'format ...'");
+      if (words[1] == "ascii") header.format = PlyFormat::kAscii;
+      else if (words[1] == "binary_little_endian") header.format = PlyFormat::kLittleEndian;
+      else if (words[1] == "binary_big_endian") header.format = PlyFormat::kBigEndian;
+      else fail(path, at + "unknown format " + shown(words[1]));
+      continue;
+    }
+    if (words.empty()) fail(path, at + "empty line");
+    if (words[0] == "comment" || words[0] == "obj_info") continue;
+    if (words[0] == "end_header") {
+      ended = true;
+    } else if (words[0] == "element") {
+      std::int64_t count = -1;
+      if (words.size() != 3 || !parseInteger(words[2], count) || count < 0)
+        fail(path, at + "expected 'element NAME COUNT'");
+      header.elements.push_back({std::string(words[1]), static_cast<std::uint64_t>(count), {}});
+    } else if (words[0] == "property") {
+      if (header.elements.empty()) fail(path, at + "property before any element");
+      PlyProperty property;
+      if (words.size() == 5 && words[1] == "list") {
+        property.list = true;
+        property.count_type = plyType(words[2]);
+        property.type = plyType(words[3]);
+        property.type_name = words[3];
+        property.name = words[4];
+        if (!property.count_type.integer)
+          fail(path, at + "list length type " + shown(words[2]) + " is not an integer type");
+        if (property.type.bytes == 0) fail(path, at + "unknown type " + shown(words[3]));
+      } else if (words.size() == 3) {
+        property.type = plyType(words[1]);
+        property.type_name = words[1];
+        property.name = words[2];
+        if (property.type.bytes == 0) fail(path, at + "unknown type " + shown(words[1]));
+      } else {
+        fail(path, at + "expected 'property TYPE NAME' or 'property list TYPE TYPE NAME'");
+      }
+      header.elements.back().properties.push_back(property);
+    } else {
+      fail(path, at + "unexpected " + shown(words[0]));
+    }
+  }
+  if (!ended) fail(path, line_number < 2 ? "not a PLY file" : "the PLY header has no end_header");
+  header.body_offset = static_cast<std::uint64_t>(in.tellg());
+
+  // What CGAL's read_PLY interprets, and the types it assumes for it.
+  bool has_vertices = false, has_faces = false;
+  for (const PlyElement& element : header.elements) {
+    const std::string what = "PLY element '" + element.name + "'";
+    if (element.properties.empty() && element.count > 0) fail(path, what + " has no properties");
+    if (isVertexElement(element.name)) {
+      has_vertices = true;
+      for (const char* axis : {"x", "y", "z"}) {
+        const PlyProperty* p = element.find(axis);
+        if (p == nullptr) fail(path, what + " has no '" + axis + "' property");
+        if (p->list || !p->type.is_float())
+          fail(path, what + ": '" + axis + "' is " + p->type_name +
+                         "; only float or double coordinates are read");
+      }
+    } else if (isFaceElement(element.name)) {
+      has_faces = has_faces || element.count > 0;
+      const PlyProperty* p = element.find("vertex_indices");
+      if (p == nullptr) p = element.find("vertex_index");
+      if (p == nullptr || !p->list || p->type.bytes != 4 || !p->type.integer)
+        fail(path, what + " needs a 'vertex_indices' list of int or uint (the only index types "
+                          "read)");
+    } else if (element.name == "halfedge") {
+      for (const char* end : {"source", "target"}) {
+        const PlyProperty* p = element.find(end);
+        if (p != nullptr && (p->list || p->type.bytes != 4 || !p->type.integer || p->type.is_signed))
+          fail(path, what + ": '" + end + "' must be uint");
+      }
+    }
+  }
+  if (!has_vertices) fail(path, "the PLY file has no vertex element");
+  if (!has_faces) fail(path, "the PLY file declares no faces");
+  return header;
+}
+
+std::string plyItem(const PlyElement& element, std::uint64_t item) {
+  return "PLY element '" + element.name + "' item " + std::to_string(item);
+}
+
+// Walks a binary PLY body: every list length must fit in the bytes left.
+void walkBinaryPly(const std::string& path, std::istream& in, const PlyHeader& header,
+                   std::uint64_t file_size) {
+  std::uint64_t position = header.body_offset;
+  const bool big_endian = header.format == PlyFormat::kBigEndian;
+  const auto truncated = [&](const PlyElement& element, std::uint64_t item) {
+    fail(path, "the file ends inside " + plyItem(element, item) + " (truncated file)");
+  };
+  for (const PlyElement& element : header.elements) {
+    if (element.count == 0) continue;
+    std::uint64_t fixed_bytes = 0;  // per item, when there are no lists
+    bool has_list = false;
+    for (const PlyProperty& p : element.properties) {
+      has_list = has_list || p.list;
+      fixed_bytes += static_cast<std::uint64_t>(p.list ? p.count_type.bytes : p.type.bytes);
+    }
+    const std::uint64_t left = file_size - position;
+    if (element.count > left / fixed_bytes) {
+      fail(path, "PLY element '" + element.name + "' declares " + std::to_string(element.count) +
+                     " items of at least " + std::to_string(fixed_bytes) + " bytes, but only " +
+                     std::to_string(left) + " bytes are left (truncated file or wrong count)");
+    }
+    if (!has_list) {
+      position += element.count * fixed_bytes;
+      in.seekg(static_cast<std::streamoff>(position));
+      continue;
+    }
+    for (std::uint64_t item = 0; item < element.count; ++item) {
+      for (const PlyProperty& p : element.properties) {
+        if (!p.list) {
+          if (file_size - position < static_cast<std::uint64_t>(p.type.bytes))
+            truncated(element, item);
+          in.ignore(p.type.bytes);
+          position += static_cast<std::uint64_t>(p.type.bytes);
+          continue;
+        }
+        const int n = p.count_type.bytes;
+        unsigned char bytes[4] = {0, 0, 0, 0};
+        if (file_size - position < static_cast<std::uint64_t>(n) ||
+            !in.read(reinterpret_cast<char*>(bytes), n))
+          truncated(element, item);
+        position += static_cast<std::uint64_t>(n);
+        std::uint64_t raw = 0;
+        for (int b = 0; b < n; ++b) raw |= std::uint64_t(bytes[big_endian ? n - 1 - b : b]) << (8 * b);
+        const bool negative = p.count_type.is_signed && (raw >> (8 * n - 1)) != 0;
+        if (negative)
+          fail(path, plyItem(element, item) + ": negative list length for '" + p.name + "'");
+        const std::uint64_t bytes_needed = raw * static_cast<std::uint64_t>(p.type.bytes);
+        if (bytes_needed > file_size - position)
+          fail(path, plyItem(element, item) + ": list '" + p.name + "' declares " +
+                         std::to_string(raw) + " entries but the file ends first");
+        in.ignore(static_cast<std::streamsize>(bytes_needed));
+        position += bytes_needed;
+      }
+    }
+    in.seekg(static_cast<std::streamoff>(position));
+  }
+}
+
+// Reads the next whitespace-separated word of an ASCII PLY body; false at the end.
+bool nextPlyWord(std::streambuf& buffer, std::string& word) {
+  word.clear();
+  int c;
+  while ((c = buffer.sgetc()) != EOF && std::isspace(c)) buffer.sbumpc();
+  while ((c = buffer.sgetc()) != EOF && !std::isspace(c)) {
+    word += static_cast<char>(c);
+    buffer.sbumpc();
+    if (word.size() > 512) break;  // no number is that long: reported as not a number
+  }
+  return !word.empty();
+}
+
+// Checks that an ASCII PLY word is a value of the given type (integers in range, finite floats).
+std::string checkPlyValue(std::string_view word, const PlyType& type, std::int64_t& integer) {
+  if (type.integer) {
+    if (!parseInteger(word, integer)) return shown(word) + " is not an integer";
+    const std::int64_t max = type.is_signed ? (std::int64_t(1) << (8 * type.bytes - 1)) - 1
+                                            : (std::int64_t(1) << (8 * type.bytes)) - 1;
+    const std::int64_t min = type.is_signed ? -max - 1 : 0;
+    if (integer < min || integer > max) return shown(word) + " is out of range for its type";
+    return {};
+  }
+  double value;
+  switch (parseDouble(word, value)) {
+    case NumberStatus::kOk: return {};
+    case NumberStatus::kNonFinite: return shown(word) + " is not finite";
+    case NumberStatus::kNotANumber: break;
+  }
+  return shown(word) + " is not a number";
+}
+
+// Walks an ASCII PLY body: every word must be a number of its declared type, every list length
+// must fit in the words left.
+void walkAsciiPly(const std::string& path, std::istream& in, const PlyHeader& header,
+                  std::uint64_t file_size) {
+  std::uint64_t left = file_size - header.body_offset;  // upper bound on the bytes still unread
+  for (const PlyElement& element : header.elements) {
+    if (element.count == 0) continue;
+    // Every value takes at least two bytes ("0 "), the very last one at least one.
+    const std::uint64_t min_bytes = 2 * element.properties.size();
+    if (element.count > (left + 1) / min_bytes) {
+      fail(path, "PLY element '" + element.name + "' declares " + std::to_string(element.count) +
+                     " items but only " + std::to_string(left) +
+                     " bytes are left (truncated file or wrong count)");
+    }
+    left -= std::min(left, element.count * min_bytes);
+  }
+  std::streambuf& buffer = *in.rdbuf();
+  std::string word;
+  std::int64_t integer = 0;
+  const std::uint64_t body = file_size - header.body_offset;
+  for (const PlyElement& element : header.elements) {
+    for (std::uint64_t item = 0; item < element.count; ++item) {
+      for (const PlyProperty& p : element.properties) {
+        const auto next = [&](const PlyType& type) {
+          if (!nextPlyWord(buffer, word))
+            fail(path, "the file ends inside " + plyItem(element, item) + " (truncated file)");
+          const std::string problem = checkPlyValue(word, type, integer);
+          if (!problem.empty()) fail(path, plyItem(element, item) + ", '" + p.name + "': " + problem);
+        };
+        if (!p.list) {
+          next(p.type);
+          continue;
+        }
+        next(p.count_type);
+        if (integer < 0)
+          fail(path, plyItem(element, item) + ": negative list length for '" + p.name + "'");
+        if (static_cast<std::uint64_t>(integer) > body)
+          fail(path, plyItem(element, item) + ": list '" + p.name + "' declares " +
+                         std::to_string(integer) + " entries but the file ends first");
+        for (std::int64_t k = integer; k > 0; --k) next(p.type);
+      }
+    }
+  }
+}
+
+// ---------------------------------------------------------------------------------------------
+// STL.
+
+std::uint32_t littleEndian32(const unsigned char* bytes) {
+  return std::uint32_t(bytes[0]) | std::uint32_t(bytes[1]) << 8 | std::uint32_t(bytes[2]) << 16 |
+         std::uint32_t(bytes[3]) << 24;
+}
+
+// Decides ASCII or binary the way CGAL does, checks a binary file's size and coordinates.
+void checkStl(const std::string& path, std::istream& in, std::uint64_t file_size) {
+  constexpr std::uint64_t kHeaderBytes = 84, kTriangleBytes = 50;
+  unsigned char header[kHeaderBytes] = {};
+  in.read(reinterpret_cast<char*>(header), kHeaderBytes);
+  const std::uint64_t got = static_cast<std::uint64_t>(in.gcount());
+  std::uint64_t first = 0;  // CGAL skips leading whitespace, then looks for "solid" + space/EOL
+  while (first < got && std::isspace(header[first])) ++first;
+  const bool solid = got >= first + 6 && std::memcmp(header + first, "solid", 5) == 0 &&
+                     (header[first + 5] == ' ' || header[first + 5] == '\n' ||
+                      header[first + 5] == '\r');
+  const std::uint64_t triangles = got == kHeaderBytes ? littleEndian32(header + 80) : 0;
+  const bool binary_size = got == kHeaderBytes &&
+                           kHeaderBytes + kTriangleBytes * triangles == file_size;
+  if (solid && !binary_size) {
+    // ASCII: CGAL grows its arrays while it reads. A file cut short must fail, but when CGAL's
+    // ASCII parse fails it retries as binary, and its binary parser calls a file shorter than
+    // 80 bytes empty and succeeds, keeping the facets read so far; so look for the end here.
+    constexpr std::uint64_t kTail = 4096;
+    const std::uint64_t tail_start = file_size > kTail ? file_size - kTail : 0;
+    std::string tail(file_size - tail_start, '\0');
+    in.clear();
+    in.seekg(static_cast<std::streamoff>(tail_start));
+    in.read(tail.data(), static_cast<std::streamsize>(tail.size()));
+    if (tail.find("endsolid") == std::string::npos)
+      fail(path, "the ASCII STL has no 'endsolid' at its end (truncated file)");
+    return;
+  }
+  if (got < kHeaderBytes)
+    fail(path, "not an ASCII STL (no 'solid') and too short for a binary STL (" +
+                   std::to_string(file_size) + " bytes; the binary header alone has 84)");
+  if (kHeaderBytes + kTriangleBytes * triangles > file_size)
+    fail(path, "the binary STL header declares " + plural(triangles, "triangle") +
+                   ", which need " + std::to_string(kHeaderBytes + kTriangleBytes * triangles) +
+                   " bytes, but the file has " + std::to_string(file_size) +
+                   " (truncated file)");
+  unsigned char record[kTriangleBytes];
+  for (std::uint64_t t = 0; t < triangles; ++t) {
+    if (!in.read(reinterpret_cast<char*>(record), kTriangleBytes))
+      fail(path, "read error in binary STL triangle " + std::to_string(t));
+    for (int k = 3; k < 12; ++k) {  // the 9 corner coordinates after the normal
+      const std::uint32_t bits = littleEndian32(record + 4 * k);
+      if ((bits & 0x7f800000u) == 0x7f800000u)
+        fail(path, "binary STL triangle " + std::to_string(t) + " has a non-finite coordinate");
+    }
+  }
+}
+
+// ---------------------------------------------------------------------------------------------
+
+std::string cgalRejected(Format format, const std::string& diagnosis) {
+  if (!diagnosis.empty()) return diagnosis;
+  switch (format) {
+    case Format::kOff:
+      return "malformed OFF data (vertex lines need 3 numbers, face lines 'k i1 ... ik' with "
+             "indices below the vertex count)";
+    case Format::kObj:
+      return "malformed OBJ file (a 'v' line without 3 numbers, an unsupported statement such "
+             "as 'l', or no vertices or faces)";
+    case Format::kPly:
+      return "malformed PLY data (CGAL's reader stopped before the end)";
+    case Format::kStl:
+      return "malformed ASCII STL (expected 'facet ... vertex x y z ... endfacet' blocks, 3 "
+             "vertices each, closed by 'endsolid')";
+  }
+  return "malformed file";
+}
+
+}  // namespace
+
+Mesh readMesh(const std::string& path) {
+  std::ifstream in;
+  const std::uint64_t file_size = openInput(path, in);
+  const Format format = formatOf(path);
+
+  OffHeader off_header;
+  switch (format) {
+    case Format::kOff:
+      off_header = checkOffHeader(path, in, file_size);
+      break;
+    case Format::kPly: {
+      const PlyHeader header = parsePlyHeader(path, in);
+      if (header.format == PlyFormat::kAscii) walkAsciiPly(path, in, header, file_size);
+      else walkBinaryPly(path, in, header, file_size);
+      break;
+    }
+    case Format::kStl:
+      checkStl(path, in, file_size);
+      break;
+    case Format::kObj:
+      break;
+  }
+  in.clear();
+  in.seekg(0);
+  if (!in) fail(path, "cannot rewind the file");
+
+  std::vector<CgalPoint> points;
+  std::vector<Corners> polygons;
+  bool ok = false;
+  try {
+    const auto quiet = CGAL::parameters::verbose(false);
+    switch (format) {
+      case Format::kOff: ok = CGAL::IO::read_OFF(in, points, polygons, quiet); break;
+      case Format::kObj: ok = CGAL::IO::read_OBJ(in, points, polygons, quiet); break;
+      case Format::kPly: ok = CGAL::IO::read_PLY(in, points, polygons, quiet); break;
+      case Format::kStl: ok = CGAL::IO::read_STL(in, points, polygons, quiet); break;
+    }
+  } catch (const TooManyCorners& e) {
+    fail(path, "a face declares " + std::to_string(e.count) + " corners (at most " +
+                   std::to_string(kMaxPolygonCorners) + " are read)");
+  } catch (const std::bad_alloc&) {
+    fail(path, "out of memory while reading");
+  } catch (const std::exception& e) {
+    fail(path, std::string("CGAL's reader failed: ") + e.what());
+  }
+  if (!ok) {
+    std::string diagnosis;
+    if (format == Format::kOff) diagnosis = diagnoseOffBody(in, off_header);
+    if (format == Format::kObj) diagnosis = diagnoseObj(in);
+    fail(path, cgalRejected(format, diagnosis));
+  }
+
+  Mesh mesh;
+  mesh.name = path;
+  if (points.size() >= kInvalidIndex) fail(path, "too many vertices (" + std::to_string(points.size()) + ")");
+  mesh.positions.reserve(points.size());
+  for (const CgalPoint& p : points) mesh.positions.emplace_back(p.x(), p.y(), p.z());
+
+  std::size_t triangle_count = 0;
+  for (std::size_t f = 0; f < polygons.size(); ++f) {
+    const Corners& corners = polygons[f];
+    if (corners.size() < 3)
+      fail(path, "face " + std::to_string(f) + " has " + plural(corners.size(), "corner") +
+                     " (at least 3 needed)");
+    for (std::size_t v : corners) {
+      if (v >= points.size())
+        fail(path, "face " + std::to_string(f) + " uses vertex " + std::to_string(v) +
+                       " but the file has " + plural(points.size(), "vertex"));
+    }
+    triangle_count += corners.size() - 2;
+  }
+  if (triangle_count == 0) fail(path, "the file has no faces");
+  mesh.triangles.reserve(triangle_count);
+  for (const Corners& corners : polygons) {  // fan: (c0,c1,c2), (c0,c2,c3), ...
+    for (std::size_t k = 1; k + 1 < corners.size(); ++k) {
+      mesh.triangles.push_back({static_cast<VertexIndex>(corners[0]),
+                                static_cast<VertexIndex>(corners[k]),
+                                static_cast<VertexIndex>(corners[k + 1])});
+    }
+  }
+  const std::string problem = checkMesh(mesh);
+  if (!problem.empty()) throw MeshError(problem);
+  return mesh;
+}
+
+void writeOff(const Mesh& mesh, const std::string& path) {
+  std::ofstream out(path, std::ios::out | std::ios::trunc);
+  if (!out.is_open()) fail(path, std::string("cannot write the file (") + std::strerror(errno) + ")");
+  out.imbue(std::locale::classic());
+  out.precision(std::numeric_limits<double>::max_digits10);
+  out << "OFF\n" << mesh.positions.size() << ' ' << mesh.triangles.size() << " 0\n";
+  for (const Vec3& p : mesh.positions) out << p.x() << ' ' << p.y() << ' ' << p.z() << '\n';
+  for (const Triangle& t : mesh.triangles) out << "3 " << t[0] << ' ' << t[1] << ' ' << t[2] << '\n';
+  out.close();
+  if (out.fail()) fail(path, "write error (disk full?)");
+}
+
+std::vector<Vec3> readPoints(const std::string& path) {
+  std::ifstream file;
+  const bool from_stdin = path == "-";
+  const std::string name = from_stdin ? std::string("<stdin>") : path;
+  if (!from_stdin) {
+    namespace fs = std::filesystem;
+    std::error_code ec;
+    const fs::file_status status = fs::status(path, ec);
+    if (status.type() == fs::file_type::not_found) fail(path, "no such file");
+    if (status.type() == fs::file_type::directory) fail(path, "is a directory, not a file");
+    errno = 0;
+    file.open(path);
+    if (!file.is_open())
+      fail(path, std::string("cannot open the file (") +
+                     (errno != 0 ? std::strerror(errno) : "unknown reason") + ")");
+  }
+  std::istream& in = from_stdin ? std::cin : file;
+
+  std::vector<Vec3> points;
+  std::string line;
+  std::uint64_t line_number = 0;
+  while (std::getline(in, line)) {
+    ++line_number;
+    const std::size_t hash = line.find('#');
+    if (hash != std::string::npos) line.resize(hash);
+    const auto words = splitWords(line);
+    if (words.empty()) continue;
+    const std::string at = name + ":" + std::to_string(line_number) + ": ";
+    if (words.size() != 3)
+      throw MeshError(at + "expected 3 numbers 'x y z', found " + plural(words.size(), "field"));
+    Vec3 p;
+    for (int k = 0; k < 3; ++k) {
+      switch (parseDouble(words[k], p[k])) {
+        case NumberStatus::kOk: break;
+        case NumberStatus::kNonFinite: throw MeshError(at + shown(words[k]) + " is not finite");
+        case NumberStatus::kNotANumber: throw MeshError(at + shown(words[k]) + " is not a number");
+      }
+    }
+    points.push_back(p);
+  }
+  if (in.bad()) throw MeshError(name + ": read error");
+  return points;
+}
+
+}  // namespace meshsweeper

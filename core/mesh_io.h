@@ -9,11 +9,18 @@
 
 namespace meshsweeper {
 
-// Reads OFF, OBJ, PLY (ASCII or binary) or STL (ASCII or binary), chosen by extension.
+// Reads OFF, OBJ, PLY (ASCII or binary) or STL (ASCII or binary), chosen by extension
+// (case-insensitive), through CGAL's polygon-soup readers.
 // Vertex order and face order are the file's; polygons are fan-triangulated in face order
 // (face f with corners c0..ck gives (c0,c1,c2), (c0,c2,c3), ...), so a result's triangle index
-// indexes that triangle list. Throws MeshError ("PATH: problem") on a missing, unreadable,
-// truncated or garbage file, non-finite coordinates, out-of-range indices or an empty mesh.
+// indexes that triangle list. Exception: STL stores three corners per triangle and no vertices;
+// CGAL merges corners with exactly equal coordinates into one vertex, numbered in order of first
+// appearance, so an STL mesh has shared vertices and triangle t is the file's triangle t.
+// Degenerate triangles, duplicate and isolated vertices are kept. Binary OFF, SKEL, nOFF, OBJ
+// 'l' lines and polygons of more than 2^20 corners are refused.
+// Throws MeshError ("PATH: problem") on a missing, unreadable, truncated or garbage file, header
+// counts the file size cannot hold (checked before anything is allocated), non-finite
+// coordinates, out-of-range indices, a face with fewer than 3 corners or a mesh without faces.
 Mesh readMesh(const std::string& path);
 
 // Writes an ASCII OFF file. Throws MeshError when the file cannot be written.

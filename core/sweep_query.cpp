@@ -16,6 +16,16 @@
 // Within d: depth-first like the fresh query with the fixed radius d (every node whose bound
 //   is within d must be opened whatever the order, so no heap is needed).
 //
+// Coherent exact query (set certificate, DESIGN.md section 2): at an anchor q0 with distance
+//   D0, gather every face within D0 + 2R (at most max_candidates, the nearest; then the reach L
+//   is the distance of the first face left out). Every other face f has d(q0, f) >= L, so for
+//   a later point p, d(p, f) >= L - |p - q0|. If the best candidate is at M with
+//   M + |p - q0| < L, no other face can be closer: M is exact. Else rebuild at p, the
+//   depth-first query starting from the distance to the previous closest face.
+// Dynamic front (paper section 5.1): the front persists; moving by delta lowers every bound by
+//   delta. Entries store bound + drift-at-computation, so the current bound is key - drift and
+//   the heap order never changes; a stale entry reaching the top is recomputed and pushed back.
+//
 // Float boxes are conservative: stored rounded outward and widened by a margin that covers the
 // rounding of the query point (hierarchy_build.cpp); the pruning threshold gets a relative slack
 // for the float arithmetic. Points farther than ~1e15 mesh radii from the mesh skip box pruning.
@@ -69,9 +79,9 @@ struct ScaledPoint {
   bool far;  // too far for float boxes: every box bound is taken as 0
 };
 
-ScaledPoint scalePoint(const Hierarchy& h, const Vec3& p) {
+ScaledPoint scalePoint(const TreeGeometry& g, const Vec3& p) {
   ScaledPoint s{};
-  const Vec3 local = (p - h.center()) * h.boxScale();
+  const Vec3 local = (p - g.center) * g.box_scale;
   s.far = !(local.cwiseAbs().maxCoeff() < kFarLimit);
   for (int axis = 0; axis < 3; ++axis) s.q[axis] = s.far ? 0.0f : static_cast<float>(local[axis]);
   return s;
@@ -88,19 +98,6 @@ inline double boxLowerBound(float d2, double inv_scale) {
   return std::sqrt(static_cast<double>(d2) * (1 - kBoxSlack)) * inv_scale;
 }
 
-TriangleHit makeHit(const Mesh& mesh, TriangleIndex f, const Vec3& p) {
-  const Triangle& t = mesh.triangles[f];
-  const TriangleClosest c =
-      closestPointOnTriangle(p, mesh.positions[t[0]], mesh.positions[t[1]], mesh.positions[t[2]]);
-  TriangleHit hit;
-  hit.distance = std::sqrt(c.squared_distance);
-  hit.triangle = f;
-  hit.point = c.point;
-  hit.barycentric = c.barycentric;
-  hit.feature = c.feature;
-  return hit;
-}
-
 void fillFromHit(ClosestPoint& out, const TriangleHit& hit) {
   out.distance = out.lower = out.upper = hit.distance;
   out.point = hit.point;
@@ -113,27 +110,115 @@ bool hitBefore(const TriangleHit& a, const TriangleHit& b) {
   return a.distance != b.distance ? a.distance < b.distance : a.triangle < b.triangle;
 }
 
+// A surface point at distance `upper`: an exact face point, or a vertex (on the surface).
+ClosestPoint upperAnswer(const Hierarchy& h, const Vec3* positions, const TriangleHit* face_hit,
+                         VertexIndex vertex, double upper, double lower) {
+  ClosestPoint out;
+  if (face_hit) {
+    fillFromHit(out, *face_hit);
+  } else if (vertex != kInvalidIndex) {
+    const TriangleIndex f = h.vertexFace()[vertex];
+    const Triangle& t = h.mesh().triangles[f];
+    const int k = t[0] == vertex ? 0 : t[1] == vertex ? 1 : 2;
+    out.distance = upper;
+    out.point = positions[vertex];
+    out.triangle = f;
+    out.barycentric = Vec3::Zero();
+    out.barycentric[k] = 1;
+    out.feature = static_cast<Feature>(k);
+  } else {
+    out.distance = std::numeric_limits<double>::quiet_NaN();
+    out.lower = out.upper = out.distance;
+    return out;
+  }
+  out.upper = out.distance;
+  out.lower = std::min(lower, out.distance);
+  return out;
+}
+
+// Lower bound from one slot: the larger of its box bound and d(p, slot triangle) - eps.
+double slotBound(const Node8& node, int k, const Vec3* positions, const Vec3& p, float box_d2,
+                 double inv_scale) {
+  const double to_triangle = std::sqrt(squaredDistanceToTriangle(
+      p, positions[node.corner[0][k]], positions[node.corner[1][k]], positions[node.corner[2][k]]));
+  return std::max(boxLowerBound(box_d2, inv_scale), to_triangle * (1 - 1e-12) - node.eps[k]);
+}
+
 }  // namespace
 
-QueryStream::QueryStream(std::shared_ptr<const Hierarchy> hierarchy)
-    : hierarchy_(std::move(hierarchy)) {
+QueryStream::QueryStream(std::shared_ptr<const Hierarchy> hierarchy, CoherenceOptions options)
+    : hierarchy_(std::move(hierarchy)), options_(options) {
   assert(hierarchy_);
+  rest_ = hierarchy_->restGeometry();
   stack_.reserve(64);
   heap_.reserve(64);
 }
 
-ClosestPoint QueryStream::closest(const Vec3& p) {
-  const Hierarchy& h = *hierarchy_;
-  counters_ = {};
-  const ScaledPoint sp = scalePoint(h, p);
-  const double scale2 = h.boxScale() * h.boxScale();
-  const auto& nodes = h.nodes();
-  const auto& blocks = h.leafBlocks();
-  const auto& lanes = h.leafTriangles();
+void QueryStream::setGeometry(const TreeGeometry* geometry) {
+  geometry_ = geometry;
+  reset();
+}
 
-  double best2 = kInf;
-  TriangleIndex best_face = kInvalidIndex;
-  float threshold = kFloatInf;
+void QueryStream::reset() {
+  has_set_ = false;
+  has_last_ = false;
+  has_front_ = false;
+  last_face_ = kInvalidIndex;
+  mean_step_ = 0;
+  front_.clear();
+}
+
+void QueryStream::leafDistances(int32_t leaf, const Vec3& p, double out[8]) {
+  const TreeGeometry& g = geometry();
+  if (g.leaf_blocks) {
+    squaredDistancesToBlock(p, g.leaf_blocks[leaf], out);
+    return;
+  }
+  // Moving geometry without inline faces: gather the lanes' corners from the positions.
+  const Hierarchy& h = *hierarchy_;
+  const TriangleIndex* lanes = &h.leafTriangles()[8 * static_cast<size_t>(leaf)];
+  const uint32_t used = h.leafLanes(leaf);
+  for (uint32_t lane = 0; lane < 8; ++lane) {
+    const Triangle& t = h.mesh().triangles[lanes[lane < used ? lane : 0]];
+    for (int k = 0; k < 3; ++k) {
+      const Vec3& x = g.positions[t[k]];
+      for (int axis = 0; axis < 3; ++axis) gather_.v[k][axis][lane] = x[axis];
+    }
+  }
+  squaredDistancesToBlock(p, gather_, out);
+}
+
+TriangleHit QueryStream::hitOn(TriangleIndex face, const Vec3& p) const {
+  const Vec3* x = geometry().positions;
+  const Triangle& t = hierarchy_->mesh().triangles[face];
+  const TriangleClosest c = closestPointOnTriangle(p, x[t[0]], x[t[1]], x[t[2]]);
+  TriangleHit hit;
+  hit.distance = std::sqrt(c.squared_distance);
+  hit.triangle = face;
+  hit.point = c.point;
+  hit.barycentric = c.barycentric;
+  hit.feature = c.feature;
+  return hit;
+}
+
+// Depth-first search from the root with best squared distance start2 (best_face holds its face).
+// With reach > 0, every face within sqrt(best) + reach (as best shrinks) is gathered into
+// gathered_. Returns the best squared distance; best_face is its face.
+double QueryStream::depthFirst(const Vec3& p, double start2, double reach, TriangleIndex& best_face) {
+  const Hierarchy& h = *hierarchy_;
+  const TreeGeometry& g = geometry();
+  const ScaledPoint sp = scalePoint(g, p);
+  const double scale2 = g.box_scale * g.box_scale;
+  const TriangleIndex* lanes = h.leafTriangles().data();
+
+  double best2 = start2;
+  auto limit2 = [&] {
+    if (reach <= 0) return best2;
+    const double r = std::sqrt(best2) + reach;
+    return r * r;
+  };
+  double gather2 = limit2();
+  float threshold = pruneThreshold(gather2, scale2);
   stack_.clear();
   stack_.push_back({0, 0.0f});
   float dist[8];
@@ -144,7 +229,7 @@ ClosestPoint QueryStream::closest(const Vec3& p) {
     if (entry.bound > threshold) continue;
     if (isLeafRef(entry.ref)) {
       const int32_t leaf = leafIndex(entry.ref);
-      squaredDistancesToBlock(p, blocks[leaf], exact);
+      leafDistances(leaf, p, exact);
       const uint32_t used = h.leafLanes(leaf);
       ++counters_.leaves_tested;
       counters_.triangles_tested += used;
@@ -154,10 +239,17 @@ ClosestPoint QueryStream::closest(const Vec3& p) {
           best_face = lanes[8 * leaf + lane];
         }
       }
-      threshold = pruneThreshold(best2, scale2);
+      if (reach > 0) {
+        gather2 = limit2();
+        for (uint32_t lane = 0; lane < used; ++lane)
+          if (exact[lane] <= gather2) gathered_.emplace_back(exact[lane], lanes[8 * leaf + lane]);
+      } else {
+        gather2 = best2;
+      }
+      threshold = pruneThreshold(gather2, scale2);
       continue;
     }
-    const Node8& node = nodes[entry.ref];
+    const Node8& node = g.nodes[entry.ref];
     ++counters_.nodes_visited;
     if (sp.far) std::fill(dist, dist + 8, 0.0f); else boxDistances(node, sp.q, dist);
     // Children below the threshold, pushed farthest first so the closest is popped next.
@@ -171,36 +263,121 @@ ClosestPoint QueryStream::closest(const Vec3& p) {
     }
     stack_.insert(stack_.end(), open, open + count);
   }
+  return best2;
+}
 
+ClosestPoint QueryStream::closest(const Vec3& p) {
+  counters_ = {};
+  TriangleIndex face = kInvalidIndex;
+  depthFirst(p, kInf, 0, face);
   ClosestPoint out;
-  out.counters = counters_;
-  if (best_face == kInvalidIndex) {  // only for a non-finite query point
+  if (face == kInvalidIndex) {  // only for a non-finite query point
     out.distance = out.lower = out.upper = std::numeric_limits<double>::quiet_NaN();
-    return out;
+  } else {
+    fillFromHit(out, hitOn(face, p));
   }
-  fillFromHit(out, makeHit(h.mesh(), best_face, p));
+  out.counters = counters_;
+  return out;
+}
+
+ClosestPoint QueryStream::closestCoherent(const Vec3& p) {
+  const TreeGeometry& g = geometry();
+  counters_ = {};
+  ++coherence_.steps;
+  if (has_last_) {
+    const double step = (p - last_point_).norm();
+    mean_step_ = coherence_.steps > 2 ? 0.9 * mean_step_ + 0.1 * step : step;
+  }
+  TriangleIndex face = kInvalidIndex;
+  bool certified = false;
+  if (has_set_ && set_version_ == g.version) {
+    const double moved = (p - anchor_).norm();
+    if (moved < set_reach_) {
+      double best2 = kInf;
+      double exact[8];
+      const size_t count = set_faces_.size();
+      for (size_t b = 0; b < set_blocks_.size(); ++b) {
+        squaredDistancesToBlock(p, set_blocks_[b], exact);
+        const size_t lanes = std::min<size_t>(8, count - 8 * b);
+        for (size_t lane = 0; lane < lanes; ++lane) {
+          if (exact[lane] < best2) { best2 = exact[lane]; face = set_faces_[8 * b + lane]; }
+        }
+      }
+      counters_.triangles_tested = static_cast<uint32_t>(count);
+      // Certificate: every face outside the set is at least set_reach_ - moved away.
+      certified = std::sqrt(best2) + moved < set_reach_ * (1 - 1e-9);
+    }
+  }
+  if (certified) {
+    ++coherence_.certified;
+  } else {
+    ++coherence_.rebuilds;
+    const double reach = 2 * options_.reach_steps * mean_step_;
+    double start2 = kInf;
+    face = kInvalidIndex;
+    if (has_last_ && last_face_ != kInvalidIndex && set_version_ == g.version) {
+      const Triangle& t = hierarchy_->mesh().triangles[last_face_];
+      start2 = squaredDistanceToTriangle(p, g.positions[t[0]], g.positions[t[1]], g.positions[t[2]]);
+      face = last_face_;
+    }
+    gathered_.clear();
+    const double best2 = depthFirst(p, start2, reach, face);
+    const double limit = std::sqrt(best2) + reach;
+    size_t kept = 0;
+    for (const auto& entry : gathered_)
+      if (std::sqrt(entry.first) <= limit) gathered_[kept++] = entry;
+    gathered_.resize(kept);
+    std::sort(gathered_.begin(), gathered_.end());
+    double set_reach = limit;
+    // Strictly farther than `limit` lies everything not gathered; keep the nearest if too many.
+    if (gathered_.size() > options_.max_candidates) {
+      set_reach = std::sqrt(gathered_[options_.max_candidates].first);
+      gathered_.resize(options_.max_candidates);
+    } else {
+      set_reach = std::nextafter(limit, kInf);
+    }
+    set_faces_.clear();
+    set_blocks_.resize((gathered_.size() + 7) / 8);
+    for (size_t i = 0; i < set_blocks_.size() * 8; ++i) {
+      const TriangleIndex f = gathered_[std::min(i, gathered_.size() - 1)].second;
+      if (i < gathered_.size()) set_faces_.push_back(f);
+      const Triangle& t = hierarchy_->mesh().triangles[f];
+      for (int k = 0; k < 3; ++k)
+        for (int axis = 0; axis < 3; ++axis) set_blocks_[i / 8].v[k][axis][i % 8] = g.positions[t[k]][axis];
+    }
+    coherence_.candidates += set_faces_.size();
+    anchor_ = p;
+    set_reach_ = set_faces_.empty() ? 0 : set_reach;
+    has_set_ = !set_faces_.empty();
+    set_version_ = g.version;
+  }
+  ClosestPoint out;
+  if (face == kInvalidIndex) {
+    out.distance = out.lower = out.upper = std::numeric_limits<double>::quiet_NaN();
+    has_last_ = false;
+    has_set_ = false;
+  } else {
+    fillFromHit(out, hitOn(face, p));
+    has_last_ = true;
+    last_point_ = p;
+    last_face_ = face;
+  }
+  out.counters = counters_;
   return out;
 }
 
 ClosestPoint QueryStream::closestWithin(const Vec3& p, double tolerance) {
   const Hierarchy& h = *hierarchy_;
-  const Mesh& mesh = h.mesh();
+  const TreeGeometry& g = geometry();
   counters_ = {};
-  const ScaledPoint sp = scalePoint(h, p);
-  const double inv_scale = 1.0 / h.boxScale();
-  const auto& nodes = h.nodes();
-  const auto& blocks = h.leafBlocks();
-  const auto& lanes = h.leafTriangles();
+  const ScaledPoint sp = scalePoint(g, p);
+  const double inv_scale = 1.0 / g.box_scale;
+  const TriangleIndex* lanes = h.leafTriangles().data();
 
   // The upper bound and the surface point that realises it: a face (exact) or a vertex.
   double upper = kInf;
   TriangleIndex upper_face = kInvalidIndex;
   VertexIndex upper_vertex = kInvalidIndex;
-  auto offerVertex = [&](VertexIndex v) {
-    const double d = (mesh.positions[v] - p).norm();
-    if (d < upper) { upper = d; upper_vertex = v; upper_face = kInvalidIndex; }
-  };
-
   auto before = [](const FrontEntry& a, const FrontEntry& b) { return a.key > b.key; };
   heap_.clear();
   heap_.push_back({0.0, 0, 8});
@@ -216,7 +393,7 @@ ClosestPoint QueryStream::closestWithin(const Vec3& p, double tolerance) {
     heap_.pop_back();
     if (isLeafRef(entry.ref)) {
       const int32_t leaf = leafIndex(entry.ref);
-      squaredDistancesToBlock(p, blocks[leaf], exact);
+      leafDistances(leaf, p, exact);
       const uint32_t used = h.leafLanes(leaf);
       ++counters_.leaves_tested;
       counters_.triangles_tested += used;
@@ -226,18 +403,17 @@ ClosestPoint QueryStream::closestWithin(const Vec3& p, double tolerance) {
       }
       continue;
     }
-    const Node8& node = nodes[entry.ref];
+    const Node8& node = g.nodes[entry.ref];
     ++counters_.nodes_visited;
     if (sp.far) std::fill(dist, dist + 8, 0.0f); else boxDistances(node, sp.q, dist);
     for (int k = 0; k < 8; ++k) {
       if (node.child[k] == kEmptyChild) continue;
-      const Vec3& a = mesh.positions[node.corner[0][k]];
-      const Vec3& b = mesh.positions[node.corner[1][k]];
-      const Vec3& c = mesh.positions[node.corner[2][k]];
-      for (int corner = 0; corner < 3; ++corner) offerVertex(node.corner[corner][k]);
-      const double to_triangle = std::sqrt(squaredDistanceToTriangle(p, a, b, c));
-      const double key = std::max(boxLowerBound(dist[k], inv_scale),
-                                  to_triangle * (1 - 1e-12) - node.eps[k]);
+      for (int corner = 0; corner < 3; ++corner) {
+        const VertexIndex v = node.corner[corner][k];
+        const double d = (g.positions[v] - p).norm();
+        if (d < upper) { upper = d; upper_vertex = v; upper_face = kInvalidIndex; }
+      }
+      const double key = slotBound(node, k, g.positions, p, dist[k], inv_scale);
       if (key < upper) {
         heap_.push_back({key, node.child[k], 8});
         std::push_heap(heap_.begin(), heap_.end(), before);
@@ -245,41 +421,23 @@ ClosestPoint QueryStream::closestWithin(const Vec3& p, double tolerance) {
     }
     counters_.heap_max = std::max<uint32_t>(counters_.heap_max, static_cast<uint32_t>(heap_.size()));
   }
-
-  ClosestPoint out;
+  TriangleHit hit;
+  if (upper_face != kInvalidIndex) hit = hitOn(upper_face, p);
+  ClosestPoint out = upperAnswer(h, g.positions, upper_face != kInvalidIndex ? &hit : nullptr,
+                                 upper_vertex, upper, lower);
   out.counters = counters_;
-  if (upper_face != kInvalidIndex) {
-    fillFromHit(out, makeHit(mesh, upper_face, p));
-  } else if (upper_vertex != kInvalidIndex) {
-    const TriangleIndex f = h.vertexFace()[upper_vertex];
-    const Triangle& t = mesh.triangles[f];
-    const int k = t[0] == upper_vertex ? 0 : t[1] == upper_vertex ? 1 : 2;
-    out.distance = upper;
-    out.point = mesh.positions[upper_vertex];
-    out.triangle = f;
-    out.barycentric = Vec3::Zero();
-    out.barycentric[k] = 1;
-    out.feature = static_cast<Feature>(k);
-  } else {
-    out.distance = std::numeric_limits<double>::quiet_NaN();
-    out.lower = out.upper = out.distance;
-    return out;
-  }
-  out.upper = out.distance;
-  out.lower = std::min(lower, out.distance);
   return out;
 }
 
 void QueryStream::kClosest(const Vec3& p, size_t k, std::vector<TriangleHit>& out) {
   const Hierarchy& h = *hierarchy_;
-  const Mesh& mesh = h.mesh();
+  const TreeGeometry& g = geometry();
   out.clear();
   counters_ = {};
   if (k == 0) return;
-  const ScaledPoint sp = scalePoint(h, p);
-  const double inv_scale = 1.0 / h.boxScale();
-  const auto& nodes = h.nodes();
-  const auto& lanes = h.leafTriangles();
+  const ScaledPoint sp = scalePoint(g, p);
+  const double inv_scale = 1.0 / g.box_scale;
+  const TriangleIndex* lanes = h.leafTriangles().data();
 
   // Front order: smaller key first; at equal keys, bounds (lane 8) before exact faces, so a
   // subtree that may hold an equally distant face is opened first; faces by triangle index.
@@ -301,7 +459,7 @@ void QueryStream::kClosest(const Vec3& p, size_t k, std::vector<TriangleHit>& ou
     const FrontEntry entry = heap_.back();
     heap_.pop_back();
     if (entry.lane < 8) {
-      out.push_back(makeHit(mesh, static_cast<TriangleIndex>(entry.ref), p));
+      out.push_back(hitOn(static_cast<TriangleIndex>(entry.ref), p));
       continue;
     }
     if (isLeafRef(entry.ref)) {
@@ -311,13 +469,10 @@ void QueryStream::kClosest(const Vec3& p, size_t k, std::vector<TriangleHit>& ou
       counters_.triangles_tested += used;
       for (uint32_t lane = 0; lane < used; ++lane) {
         const TriangleIndex f = lanes[8 * leaf + lane];
-        const Triangle& t = mesh.triangles[f];
-        const double d = std::sqrt(closestPointOnTriangle(p, mesh.positions[t[0]], mesh.positions[t[1]],
-                                                          mesh.positions[t[2]]).squared_distance);
-        push({d, static_cast<ChildRef>(f), lane});
+        push({hitOn(f, p).distance, static_cast<ChildRef>(f), lane});
       }
     } else {
-      const Node8& node = nodes[entry.ref];
+      const Node8& node = g.nodes[entry.ref];
       ++counters_.nodes_visited;
       if (sp.far) std::fill(dist, dist + 8, 0.0f); else boxDistances(node, sp.q, dist);
       for (int s = 0; s < 8; ++s) {
@@ -331,15 +486,13 @@ void QueryStream::kClosest(const Vec3& p, size_t k, std::vector<TriangleHit>& ou
 
 void QueryStream::within(const Vec3& p, double d, std::vector<TriangleHit>& out) {
   const Hierarchy& h = *hierarchy_;
-  const Mesh& mesh = h.mesh();
+  const TreeGeometry& g = geometry();
   out.clear();
   counters_ = {};
   if (!(d >= 0)) return;
-  const ScaledPoint sp = scalePoint(h, p);
-  const float threshold = pruneThreshold(d * d, h.boxScale() * h.boxScale());
-  const auto& nodes = h.nodes();
-  const auto& blocks = h.leafBlocks();
-  const auto& lanes = h.leafTriangles();
+  const ScaledPoint sp = scalePoint(g, p);
+  const float threshold = pruneThreshold(d * d, g.box_scale * g.box_scale);
+  const TriangleIndex* lanes = h.leafTriangles().data();
   stack_.clear();
   stack_.push_back({0, 0.0f});
   float dist[8];
@@ -349,18 +502,18 @@ void QueryStream::within(const Vec3& p, double d, std::vector<TriangleHit>& out)
     stack_.pop_back();
     if (isLeafRef(entry.ref)) {
       const int32_t leaf = leafIndex(entry.ref);
-      squaredDistancesToBlock(p, blocks[leaf], exact);
+      leafDistances(leaf, p, exact);
       const uint32_t used = h.leafLanes(leaf);
       ++counters_.leaves_tested;
       counters_.triangles_tested += used;
       for (uint32_t lane = 0; lane < used; ++lane) {
         if (!(exact[lane] <= d * d * (1 + 1e-9))) continue;
-        const TriangleHit hit = makeHit(mesh, lanes[8 * leaf + lane], p);
+        const TriangleHit hit = hitOn(lanes[8 * leaf + lane], p);
         if (hit.distance <= d) out.push_back(hit);
       }
       continue;
     }
-    const Node8& node = nodes[entry.ref];
+    const Node8& node = g.nodes[entry.ref];
     ++counters_.nodes_visited;
     if (sp.far) std::fill(dist, dist + 8, 0.0f); else boxDistances(node, sp.q, dist);
     for (int k = 0; k < 8; ++k) {
@@ -368,6 +521,176 @@ void QueryStream::within(const Vec3& p, double d, std::vector<TriangleHit>& out)
     }
   }
   std::sort(out.begin(), out.end(), hitBefore);
+}
+
+// ---- The dynamic front (paper section 5.1) ----
+
+namespace {
+// Heap order of the dynamic front: smaller key first; bounds before faces at equal keys; faces
+// by triangle index (same tie rules as kClosest).
+template <class Entry>
+bool driftAfter(const Entry& a, const Entry& b) {
+  if (a.key != b.key) return a.key > b.key;
+  const bool a_face = a.lane < 8, b_face = b.lane < 8;
+  if (a_face != b_face) return a_face;
+  return a_face && a.ref > b.ref;
+}
+}  // namespace
+
+void QueryStream::frontPush(const DriftEntry& e) {
+  front_.push_back(e);
+  std::push_heap(front_.begin(), front_.end(), driftAfter<DriftEntry>);
+}
+
+QueryStream::DriftEntry QueryStream::frontPop() {
+  std::pop_heap(front_.begin(), front_.end(), driftAfter<DriftEntry>);
+  const DriftEntry e = front_.back();
+  front_.pop_back();
+  return e;
+}
+
+void QueryStream::frontStart(const Vec3& p) {
+  front_.clear();
+  drift_ = 0;
+  front_point_ = p;
+  has_front_ = true;
+  front_version_ = geometry().version;
+  ++coherence_.front_resets;
+  frontPush({0.0, 0.0, 0, -1, 0, 8});
+}
+
+double QueryStream::entryBound(const DriftEntry& e, const Vec3& p, const float q[3], bool far) const {
+  const TreeGeometry& g = geometry();
+  if (e.lane < 8) return hitOn(static_cast<TriangleIndex>(e.ref), p).distance;
+  if (e.parent < 0) return 0;
+  const Node8& node = g.nodes[e.parent];
+  float box_d2 = 0;
+  if (!far) {
+    for (int axis = 0; axis < 3; ++axis) {
+      const float gap = std::max(std::max(node.lower[axis][e.slot] - q[axis], q[axis] - node.upper[axis][e.slot]), 0.0f);
+      box_d2 += gap * gap;
+    }
+  }
+  return slotBound(node, e.slot, g.positions, p, box_d2, 1.0 / g.box_scale);
+}
+
+// Refines the front at p. Anytime (k == 0): until upper - lower <= tolerance. k closest: until
+// k fresh faces reach the top (they are written to *out and pushed back).
+void QueryStream::frontRefine(const Vec3& p, const float q[3], bool far, double& upper,
+                              TriangleIndex& upper_face, VertexIndex& upper_vertex,
+                              bool stop_at_tolerance, double tolerance, size_t k,
+                              std::vector<TriangleHit>* out) {
+  const Hierarchy& h = *hierarchy_;
+  const TreeGeometry& g = geometry();
+  const double inv_scale = 1.0 / g.box_scale;
+  const TriangleIndex* lanes = h.leafTriangles().data();
+  popped_.clear();
+  float dist[8];
+  double lower = 0;
+  while (!front_.empty()) {
+    lower = std::min(front_.front().key - drift_, upper);
+    if (stop_at_tolerance && upper - lower <= tolerance) break;
+    if (!stop_at_tolerance && out->size() >= k) break;
+    DriftEntry e = frontPop();
+    if (e.drift_at < drift_) {  // stale: recompute at p and put back
+      const double bound = entryBound(e, p, q, far);
+      ++coherence_.recomputed;
+      if (e.lane < 8 && bound < upper) { upper = bound; upper_face = static_cast<TriangleIndex>(e.ref); upper_vertex = kInvalidIndex; }
+      e.key = bound + drift_;
+      e.drift_at = drift_;
+      frontPush(e);
+      continue;
+    }
+    if (e.lane < 8) {  // a fresh face at the top: the closest remaining face
+      if (stop_at_tolerance) {
+        lower = upper = e.key - drift_;
+        upper_face = static_cast<TriangleIndex>(e.ref);
+        upper_vertex = kInvalidIndex;
+        frontPush(e);
+        break;
+      }
+      out->push_back(hitOn(static_cast<TriangleIndex>(e.ref), p));
+      popped_.push_back(e);
+      continue;
+    }
+    if (isLeafRef(e.ref)) {
+      const int32_t leaf = leafIndex(e.ref);
+      const uint32_t used = h.leafLanes(leaf);
+      ++counters_.leaves_tested;
+      counters_.triangles_tested += used;
+      for (uint32_t lane = 0; lane < used; ++lane) {
+        const TriangleIndex f = lanes[8 * leaf + lane];
+        const double d = hitOn(f, p).distance;
+        if (d < upper) { upper = d; upper_face = f; upper_vertex = kInvalidIndex; }
+        frontPush({d + drift_, drift_, static_cast<ChildRef>(f), -1, 0, static_cast<uint8_t>(lane)});
+      }
+      continue;
+    }
+    const Node8& node = g.nodes[e.ref];
+    ++counters_.nodes_visited;
+    if (far) std::fill(dist, dist + 8, 0.0f); else boxDistances(node, q, dist);
+    for (int s = 0; s < 8; ++s) {
+      if (node.child[s] == kEmptyChild) continue;
+      for (int corner = 0; corner < 3; ++corner) {
+        const VertexIndex v = node.corner[corner][s];
+        const double d = (g.positions[v] - p).norm();
+        if (d < upper) { upper = d; upper_vertex = v; upper_face = kInvalidIndex; }
+      }
+      const double bound = slotBound(node, s, g.positions, p, dist[s], inv_scale);
+      frontPush({bound + drift_, drift_, node.child[s], e.ref, static_cast<uint8_t>(s), 8});
+    }
+    counters_.heap_max = std::max<uint32_t>(counters_.heap_max, static_cast<uint32_t>(front_.size()));
+  }
+  for (const DriftEntry& e : popped_) frontPush(e);
+  front_distance_ = upper;
+  lower_ = lower;
+}
+
+ClosestPoint QueryStream::closestWithinCoherent(const Vec3& p, double tolerance) {
+  const Hierarchy& h = *hierarchy_;
+  const TreeGeometry& g = geometry();
+  counters_ = {};
+  ++coherence_.steps;
+  const ScaledPoint sp = scalePoint(g, p);
+  const double moved = (p - front_point_).norm();
+  if (!has_front_ || front_version_ != g.version || front_.size() > options_.front_budget ||
+      moved > options_.jump_factor * front_distance_) {
+    frontStart(p);
+  } else {
+    drift_ += moved;
+    front_point_ = p;
+  }
+  double upper = kInf;
+  TriangleIndex upper_face = kInvalidIndex;
+  VertexIndex upper_vertex = kInvalidIndex;
+  frontRefine(p, sp.q, sp.far, upper, upper_face, upper_vertex, true, tolerance, 0, nullptr);
+  TriangleHit hit;
+  if (upper_face != kInvalidIndex) hit = hitOn(upper_face, p);
+  ClosestPoint out = upperAnswer(h, g.positions, upper_face != kInvalidIndex ? &hit : nullptr,
+                                 upper_vertex, upper, lower_);
+  out.counters = counters_;
+  return out;
+}
+
+void QueryStream::kClosestCoherent(const Vec3& p, size_t k, std::vector<TriangleHit>& out) {
+  const TreeGeometry& g = geometry();
+  out.clear();
+  counters_ = {};
+  ++coherence_.steps;
+  if (k == 0) return;
+  const ScaledPoint sp = scalePoint(g, p);
+  const double moved = (p - front_point_).norm();
+  if (!has_front_ || front_version_ != g.version || front_.size() > options_.front_budget ||
+      moved > options_.jump_factor * front_distance_) {
+    frontStart(p);
+  } else {
+    drift_ += moved;
+    front_point_ = p;
+  }
+  double upper = kInf;
+  TriangleIndex upper_face = kInvalidIndex;
+  VertexIndex upper_vertex = kInvalidIndex;
+  frontRefine(p, sp.q, sp.far, upper, upper_face, upper_vertex, false, 0, k, &out);
 }
 
 }  // namespace meshsweeper

@@ -39,11 +39,39 @@ struct TriangleHit {
   Feature feature = Feature::kFace;
 };
 
+// Settings of the coherent queries (DESIGN.md section 2), shared by all streams that use them.
+struct CoherenceOptions {
+  // Set certificate: candidates are gathered within d + 2R of the anchor point, with
+  // R = reach_steps * (running mean step length); a larger R means fewer rebuilds, larger sets.
+  double reach_steps = 6;
+  // At most this many candidate faces (the nearest are kept; the certificate shrinks to fit).
+  uint32_t max_candidates = 96;
+  // Dynamic front: back to the roots when the front holds more entries than this, or when the
+  // point jumps farther than jump_factor times its last distance to the mesh.
+  uint32_t front_budget = 4096;
+  double jump_factor = 1.0;
+};
+
+// What the coherent queries of a stream did since the stream was created or reset.
+struct CoherenceCounters {
+  uint64_t steps = 0;           // coherent queries answered
+  uint64_t certified = 0;       // answered from the cached candidate set
+  uint64_t rebuilds = 0;        // candidate set rebuilt (a depth-first query)
+  uint64_t candidates = 0;      // candidate faces gathered over all rebuilds
+  uint64_t front_resets = 0;    // dynamic front restarted from the roots
+  uint64_t recomputed = 0;      // stale front entries recomputed
+};
+
 class QueryStream {
  public:
-  explicit QueryStream(std::shared_ptr<const Hierarchy> hierarchy);
+  explicit QueryStream(std::shared_ptr<const Hierarchy> hierarchy, CoherenceOptions options = {});
 
   const Hierarchy& hierarchy() const { return *hierarchy_; }
+
+  // Queries read `geometry` instead of the hierarchy's rest geometry (nullptr: back to rest).
+  // The geometry must share the hierarchy's layout and outlive its use; when its version
+  // changes, coherent state is rebuilt.
+  void setGeometry(const TreeGeometry* geometry);
 
   // Exact closest point: depth-first, closest child first, pruning with the best distance.
   ClosestPoint closest(const Vec3& p);
@@ -60,8 +88,25 @@ class QueryStream {
   // All triangles at distance <= d, by increasing distance (ties by triangle index).
   void within(const Vec3& p, double d, std::vector<TriangleHit>& out);
 
-  // Counters of the last query.
+  // Exact closest point for a point that moves a little between calls (a path): answered from
+  // a cached candidate set while its certificate holds, else by a warm-started depth-first
+  // query that rebuilds the set. Same answers as closest().
+  ClosestPoint closestCoherent(const Vec3& p);
+
+  // The paper's dynamic process for a moving point: the priority front persists between calls;
+  // moving by delta lowers every bound by delta (a drift offset, O(1)), stale entries are
+  // recomputed when they reach the front. Same contracts as closestWithin() and kClosest().
+  ClosestPoint closestWithinCoherent(const Vec3& p, double tolerance);
+  void kClosestCoherent(const Vec3& p, size_t k, std::vector<TriangleHit>& out);
+
+  // Forgets the coherent state: the next coherent query starts from the roots.
+  void reset();
+
+  // Counters of the last query, and of the coherent queries so far.
   const QueryCounters& counters() const { return counters_; }
+  const CoherenceCounters& coherence() const { return coherence_; }
+  // Entries in the dynamic front (changing state, for memory reports).
+  size_t frontSize() const { return front_.size(); }
 
  private:
   struct FrontEntry {
@@ -73,10 +118,59 @@ class QueryStream {
     ChildRef ref;     // node or leaf block
     float bound;      // squared box distance in the hierarchy's scaled units
   };
+  // An entry of the dynamic front: key = bound + drift when computed, so the current bound is
+  // key - drift_ and heap order never changes as the point moves.
+  struct DriftEntry {
+    double key;
+    double drift_at;  // drift_ when the bound was computed; stale when < drift_
+    ChildRef ref;     // node or leaf block, or a face's triangle index (lane < 8)
+    int32_t parent;   // node holding the slot whose bounds apply (-1: the root)
+    uint8_t slot;     // slot in the parent node
+    uint8_t lane;     // 8 for a node or leaf block
+  };
+
+  const TreeGeometry& geometry() const { return geometry_ ? *geometry_ : rest_; }
+  void leafDistances(int32_t leaf, const Vec3& p, double out[8]);
+  TriangleHit hitOn(TriangleIndex face, const Vec3& p) const;
+  double depthFirst(const Vec3& p, double start2, double reach, TriangleIndex& best_face);
+  double entryBound(const DriftEntry& e, const Vec3& p, const float q[3], bool far) const;
+  void frontStart(const Vec3& p);
+  void frontPush(const DriftEntry& e);
+  DriftEntry frontPop();
+  void frontRefine(const Vec3& p, const float q[3], bool far, double& upper, TriangleIndex& upper_face,
+                   VertexIndex& upper_vertex, bool stop_at_tolerance, double tolerance, size_t k,
+                   std::vector<TriangleHit>* out);
+
   std::shared_ptr<const Hierarchy> hierarchy_;
+  CoherenceOptions options_;
+  TreeGeometry rest_;
+  const TreeGeometry* geometry_ = nullptr;
   std::vector<StackEntry> stack_;
   std::vector<FrontEntry> heap_;
   QueryCounters counters_;
+  CoherenceCounters coherence_;
+  TriangleBlock8 gather_;
+  // Set certificate (closestCoherent).
+  bool has_set_ = false;
+  uint64_t set_version_ = 0;
+  Vec3 anchor_ = Vec3::Zero();
+  double set_reach_ = 0;                    // every face outside the set is farther from anchor_
+  std::vector<TriangleIndex> set_faces_;    // [candidate]
+  std::vector<TriangleBlock8> set_blocks_;  // candidates' coordinates, 8 per block
+  std::vector<std::pair<double, TriangleIndex>> gathered_;
+  bool has_last_ = false;
+  Vec3 last_point_ = Vec3::Zero();
+  TriangleIndex last_face_ = kInvalidIndex;
+  double mean_step_ = 0;
+  // Dynamic front (closestWithinCoherent, kClosestCoherent).
+  std::vector<DriftEntry> front_;
+  std::vector<DriftEntry> popped_;
+  bool has_front_ = false;
+  uint64_t front_version_ = 0;
+  Vec3 front_point_ = Vec3::Zero();
+  double drift_ = 0;
+  double front_distance_ = 0;
+  double lower_ = 0;  // the front's lower bound after the last refinement
 };
 
 }  // namespace meshsweeper

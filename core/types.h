@@ -1,6 +1,7 @@
 #pragma once
 // Basic types shared by every module of Meshsweeper.
 #include <Eigen/Core>
+#include <Eigen/Geometry>
 
 #include <array>
 #include <cstdint>

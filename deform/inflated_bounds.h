@@ -1,0 +1,61 @@
+#pragma once
+// A freely deforming body with displacement-inflated bounds (paper section 5.3, second method;
+// DESIGN.md section 3). The caller states how far each vertex may move from the anchor
+// positions (where the bounds are exact); one bottom-up pass inflates every slot's box and
+// radius accordingly. New positions are then accepted each step without touching the bounds,
+// as long as every vertex stays within its bound; a step that breaks a bound is refused and
+// reported, so the caller can inflate again or re-anchor. Never a silently wrong answer.
+#include "core/hierarchy.h"
+
+#include <memory>
+#include <vector>
+
+namespace meshsweeper {
+
+// The outcome of DeformingBody::setPositions.
+struct DisplacementCheck {
+  bool accepted = true;                   // all vertices within their bounds
+  VertexIndex worst_vertex = kInvalidIndex;  // the vertex farthest past its bound (if refused)
+  double excess = 0;                      // how far past its bound it is
+};
+
+class DeformingBody {
+ public:
+  // Starts at the hierarchy's rest positions with exact bounds and zero displacement bounds.
+  explicit DeformingBody(std::shared_ptr<const Hierarchy> hierarchy);
+
+  // Recomputes exact bounds at `positions` (as many as the mesh has, finite; else throws
+  // std::invalid_argument) and makes them the anchor and the current positions; displacement
+  // bounds reset to zero. Costs the build's radius phase.
+  void anchor(const std::vector<Vec3>& positions);
+
+  // Every vertex v may move up to delta[v] (>= 0, finite) from the anchor positions: inflates all
+  // bounds in one bottom-up pass. Current positions outside the new bounds are reset to the
+  // anchor positions. Throws std::invalid_argument on a wrong size or a bad value.
+  void inflate(const std::vector<double>& delta);
+  // Same bound for every vertex.
+  void inflate(double delta);
+
+  // Accepts new positions if every vertex is within its bound of the anchor; otherwise keeps the
+  // previous positions and reports the worst offender. Throws std::invalid_argument on a wrong
+  // size or non-finite positions.
+  DisplacementCheck setPositions(const std::vector<Vec3>& positions);
+
+  // What queries read (QueryStream::setGeometry); valid until the body is destroyed.
+  const TreeGeometry& geometry() const { return geometry_; }
+  const std::vector<Vec3>& positions() const { return positions_; }
+  const std::vector<Vec3>& anchorPositions() const { return anchor_positions_; }
+  const std::shared_ptr<const Hierarchy>& hierarchy() const { return hierarchy_; }
+
+ private:
+  void checkSize(size_t count, const char* what) const;
+  std::shared_ptr<const Hierarchy> hierarchy_;
+  std::vector<Node8> anchor_nodes_;     // exact bounds at the anchor positions
+  std::vector<Node8> nodes_;            // inflated bounds
+  std::vector<Vec3> anchor_positions_;  // [vertex]
+  std::vector<Vec3> positions_;         // [vertex] current
+  std::vector<double> delta_;           // [vertex] displacement bounds
+  TreeGeometry geometry_;
+};
+
+}  // namespace meshsweeper

@@ -1,0 +1,139 @@
+// Key-frame bounds (paper section 5.3; DESIGN.md section 3).
+//
+// Why the interpolated bounds are valid. Positions between frames 0 and 1 are
+// x(s) = (1 - s) x0 + s x1, s in [0, 1].
+// - Boxes: for every axis, min_i x_i(s) >= (1 - s) min_i x0_i + s min_i x1_i (the minimum of a
+//   sum is at least the sum of the minima), and likewise for the maximum. So the linear
+//   interpolation of a slot's two frame boxes contains the slot's subtree vertices at s. Float
+//   rounding of the interpolation is covered by an extra margin.
+// - Radii: let T(s) be the slot's triangle at s and x(s) one of its subtree vertices. Moving
+//   every corner of a triangle by at most D moves each of its points (a convex combination of
+//   the corners) by at most D, so dist(y, T(s)) <= dist(y, T(0)) + s * D_T, where D_T is the
+//   largest corner displacement |x1 - x0| of the triangle. With |x(s) - x(0)| <= s * D_x:
+//     dist(x(s), T(s)) <= dist(x(0), T(0)) + s * (D_x + D_T) <= eps0 + s * Delta,
+//   Delta = D_T + (largest displacement among the slot's subtree vertices). From frame 1 in the
+//   same way: <= eps1 + (1 - s) * Delta. Both hold, so their minimum is a valid radius.
+#include "deform/keyframe_bounds.h"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <stdexcept>
+
+namespace meshsweeper {
+
+KeyframeBody::KeyframeBody(std::shared_ptr<const Hierarchy> hierarchy,
+                           std::vector<std::vector<Vec3>> frames)
+    : hierarchy_(std::move(hierarchy)), frames_(std::move(frames)) {
+  const Hierarchy& h = *hierarchy_;
+  const size_t n = h.mesh().positions.size();
+  if (frames_.empty()) throw std::invalid_argument("KeyframeBody: no key frame given");
+  for (size_t f = 0; f < frames_.size(); ++f) {
+    if (frames_[f].size() != n)
+      throw std::invalid_argument("KeyframeBody: frame " + std::to_string(f) + " has " +
+                                  std::to_string(frames_[f].size()) + " positions, the mesh has " +
+                                  std::to_string(n));
+    for (size_t v = 0; v < n; ++v)
+      if (!frames_[f][v].allFinite())
+        throw std::invalid_argument("KeyframeBody: frame " + std::to_string(f) + " vertex " +
+                                    std::to_string(v) + " is not finite");
+  }
+  double extent = 0;
+  for (const auto& frame : frames_) {
+    frame_nodes_.push_back(h.nodes());
+    refitBounds(h, frame.data(), frame_nodes_.back(), true);
+    for (const Vec3& x : frame) extent = std::max(extent, ((x - h.center()) * h.boxScale()).cwiseAbs().maxCoeff());
+  }
+  lerp_margin_ = boxMargin(extent);
+
+  // Delta per slot and frame pair: corner displacement + subtree displacement (bottom-up).
+  const auto& nodes = h.nodes();
+  const auto& lanes = h.leafTriangles();
+  const Mesh& mesh = h.mesh();
+  for (size_t f = 0; f + 1 < frames_.size(); ++f) {
+    std::vector<double> moved(n);
+    for (size_t v = 0; v < n; ++v) moved[v] = (frames_[f + 1][v] - frames_[f][v]).norm();
+    std::vector<double> subtree(8 * nodes.size(), 0.0);
+    std::vector<float>& delta = delta_.emplace_back(8 * nodes.size(), 0.0f);
+    for (size_t node = nodes.size(); node-- > 0;) {
+      for (int k = 0; k < 8; ++k) {
+        const ChildRef c = nodes[node].child[k];
+        if (c == kEmptyChild) continue;
+        double worst = 0;
+        if (isLeafRef(c)) {
+          for (uint32_t lane = 0; lane < h.leafLanes(leafIndex(c)); ++lane)
+            for (VertexIndex v : mesh.triangles[lanes[8 * leafIndex(c) + lane]]) worst = std::max(worst, moved[v]);
+        } else {
+          for (int j = 0; j < 8; ++j) worst = std::max(worst, subtree[8 * c + j]);
+        }
+        subtree[8 * node + k] = worst;
+        double corners = 0;
+        for (int i = 0; i < 3; ++i) corners = std::max(corners, moved[nodes[node].corner[i][k]]);
+        delta[8 * node + k] = std::nextafter(static_cast<float>((worst + corners) * (1 + 1e-9)),
+                                             std::numeric_limits<float>::infinity());
+      }
+    }
+  }
+  nodes_ = h.nodes();
+  positions_ = frames_[0];
+  geometry_.nodes = nodes_.data();
+  geometry_.leaf_blocks = nullptr;  // faces are gathered from the interpolated positions
+  geometry_.positions = positions_.data();
+  geometry_.center = h.center();
+  geometry_.box_scale = h.boxScale();
+  geometry_.version = 1;
+  setTime(0);
+}
+
+void KeyframeBody::interpolateBounds(double t) {
+  const size_t last = frames_.size() - 1;
+  t = std::clamp(std::isfinite(t) ? t : 0.0, 0.0, static_cast<double>(last));
+  const size_t f = std::min(static_cast<size_t>(t), last == 0 ? 0 : last - 1);
+  const double s = last == 0 ? 0.0 : t - static_cast<double>(f);
+  time_ = t;
+  const std::vector<Node8>& a = frame_nodes_[f];
+  const std::vector<Node8>& b = frame_nodes_[last == 0 ? 0 : f + 1];
+  const float inf = std::numeric_limits<float>::infinity();
+  const float ws = static_cast<float>(s), wr = 1.0f - ws;
+  for (size_t node = 0; node < nodes_.size(); ++node) {
+    Node8& out = nodes_[node];
+    const Node8& na = a[node];
+    const Node8& nb = b[node];
+    for (int axis = 0; axis < 3; ++axis) {
+      for (int k = 0; k < 8; ++k) {
+        out.lower[axis][k] = wr * na.lower[axis][k] + ws * nb.lower[axis][k] - lerp_margin_;
+        out.upper[axis][k] = wr * na.upper[axis][k] + ws * nb.upper[axis][k] + lerp_margin_;
+      }
+    }
+    for (int k = 0; k < 8; ++k) {
+      if (na.child[k] != kEmptyChild) continue;  // keep empty boxes empty (0 * inf is NaN)
+      for (int axis = 0; axis < 3; ++axis) {
+        out.lower[axis][k] = inf;
+        out.upper[axis][k] = -inf;
+      }
+    }
+    if (last == 0) {
+      std::copy(na.eps, na.eps + 8, out.eps);
+      continue;
+    }
+    const float* delta = &delta_[f][8 * node];
+    for (int k = 0; k < 8; ++k) {
+      const double from_a = na.eps[k] + s * delta[k];
+      const double from_b = nb.eps[k] + (1 - s) * delta[k];
+      out.eps[k] = std::nextafter(static_cast<float>(std::min(from_a, from_b)), inf);
+    }
+  }
+  ++geometry_.version;
+}
+
+void KeyframeBody::setTime(double t) {
+  interpolateBounds(t);
+  const size_t last = frames_.size() - 1;
+  const size_t f = std::min(static_cast<size_t>(time_), last == 0 ? 0 : last - 1);
+  const double s = last == 0 ? 0.0 : time_ - static_cast<double>(f);
+  const std::vector<Vec3>& a = frames_[f];
+  const std::vector<Vec3>& b = frames_[last == 0 ? 0 : f + 1];
+  for (size_t v = 0; v < positions_.size(); ++v) positions_[v] = (1 - s) * a[v] + s * b[v];
+}
+
+}  // namespace meshsweeper

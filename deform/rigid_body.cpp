@@ -1,0 +1,38 @@
+#include "deform/rigid_body.h"
+
+#include <cassert>
+#include <stdexcept>
+
+namespace meshsweeper {
+
+RigidBody::RigidBody(std::shared_ptr<const Hierarchy> hierarchy, const Eigen::Isometry3d& pose)
+    : hierarchy_(std::move(hierarchy)) {
+  setPose(pose);
+}
+
+void RigidBody::setPose(const Eigen::Isometry3d& pose) {
+  const Eigen::Matrix3d r = pose.linear();
+  if (!pose.matrix().allFinite())
+    throw std::invalid_argument("RigidBody: the pose has a non-finite entry");
+  if (!(r.transpose() * r).isIdentity(1e-9) || std::abs(r.determinant() - 1) > 1e-9)
+    throw std::invalid_argument("RigidBody: the pose's rotation is not orthonormal (a rigid pose has no scale or shear)");
+  pose_ = pose;
+  inverse_ = pose.inverse(Eigen::Isometry);
+}
+
+ClosestPoint RigidBody::toWorld(ClosestPoint result) const {
+  result.point = pose_ * result.point;
+  return result;
+}
+
+ClosestPoint RigidBody::closest(QueryStream& stream, const Vec3& world) const {
+  assert(&stream.hierarchy() == hierarchy_.get());
+  return toWorld(stream.closest(toBody(world)));
+}
+
+ClosestPoint RigidBody::closestCoherent(QueryStream& stream, const Vec3& world) const {
+  assert(&stream.hierarchy() == hierarchy_.get());
+  return toWorld(stream.closestCoherent(toBody(world)));
+}
+
+}  // namespace meshsweeper

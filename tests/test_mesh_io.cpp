@@ -1,0 +1,650 @@
+// Tests for core/mesh_io: readMesh on small hand-written files of every format (order kept, fan
+// triangulation, valid oddities) and on every kind of bad input; readPoints; writeOff.
+#include "core/mesh_io.h"
+
+#include <catch2/catch.hpp>
+
+#include <unistd.h>
+
+#include <cmath>
+#include <cstdint>
+#include <cstdio>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <iostream>
+#include <limits>
+#include <sstream>
+#include <string>
+#include <vector>
+
+using meshsweeper::Mesh;
+using meshsweeper::MeshError;
+using meshsweeper::Triangle;
+using meshsweeper::Vec3;
+using Catch::Matchers::Contains;
+using Catch::Matchers::StartsWith;
+
+namespace {
+
+// A fresh directory under the system temp folder, removed with everything in it.
+class TempDir {
+ public:
+  TempDir() {
+    std::string pattern = (std::filesystem::temp_directory_path() / "meshsweeper_io_XXXXXX").string();
+    if (mkdtemp(pattern.data()) == nullptr) throw std::runtime_error("mkdtemp failed");
+    path_ = pattern;
+  }
+  ~TempDir() {
+    std::error_code ec;
+    std::filesystem::remove_all(path_, ec);
+  }
+  TempDir(const TempDir&) = delete;
+  TempDir& operator=(const TempDir&) = delete;
+
+  std::string file(const std::string& name) const { return (path_ / name).string(); }
+
+  // Writes bytes with fwrite and returns the file's path.
+  std::string write(const std::string& name, const std::string& bytes) const {
+    const std::string path = file(name);
+    std::FILE* f = std::fopen(path.c_str(), "wb");
+    REQUIRE(f != nullptr);
+    REQUIRE(std::fwrite(bytes.data(), 1, bytes.size(), f) == bytes.size());
+    std::fclose(f);
+    return path;
+  }
+
+ private:
+  std::filesystem::path path_;
+};
+
+// Little builders for binary files.
+void putU8(std::string& s, unsigned v) { s += static_cast<char>(v & 0xffu); }
+void putU32(std::string& s, std::uint32_t v, bool big_endian = false) {
+  for (int b = 0; b < 4; ++b) putU8(s, v >> (8 * (big_endian ? 3 - b : b)));
+}
+void putF32(std::string& s, float v, bool big_endian = false) {
+  std::uint32_t bits;
+  std::memcpy(&bits, &v, 4);
+  putU32(s, bits, big_endian);
+}
+void putF64(std::string& s, double v, bool big_endian = false) {
+  std::uint64_t bits;
+  std::memcpy(&bits, &v, 8);
+  for (int b = 0; b < 8; ++b) putU8(s, static_cast<unsigned>(bits >> (8 * (big_endian ? 7 - b : b))));
+}
+
+// A binary STL: 80-byte header, count, then per triangle a normal, 3 corners and 2 spare bytes.
+std::string binaryStl(const std::string& header, const std::vector<std::array<Vec3, 3>>& triangles,
+                      std::uint32_t declared) {
+  std::string s = header;
+  s.resize(80, ' ');
+  putU32(s, declared);
+  for (const auto& t : triangles) {
+    for (int k = 0; k < 3; ++k) putF32(s, 0.0f);
+    for (const Vec3& p : t)
+      for (int k = 0; k < 3; ++k) putF32(s, static_cast<float>(p[k]));
+    putU8(s, 0);
+    putU8(s, 0);
+  }
+  return s;
+}
+
+// The message of the MeshError that readMesh throws, or "(no error)". Any other exception
+// escapes and fails the test.
+std::string readError(const std::string& path) {
+  try {
+    meshsweeper::readMesh(path);
+  } catch (const MeshError& e) {
+    return e.what();
+  }
+  return "(no error)";
+}
+
+std::string pointsError(const std::string& path) {
+  try {
+    meshsweeper::readPoints(path);
+  } catch (const MeshError& e) {
+    return e.what();
+  }
+  return "(no error)";
+}
+
+// The unit square split into two triangles, and a pentagon, as positions used by several files:
+//
+//   3 ---- 2        fan of quad 0 1 2 3:        (0,1,2) (0,2,3)
+//   |      |        fan of pentagon 0 1 4 5 6:  (0,1,4) (0,4,5) (0,5,6)
+//   0 ---- 1
+const std::vector<Vec3> kSquare = {{0, 0, 0}, {1, 0, 0}, {1, 1, 0}, {0, 1, 0}};
+
+}  // namespace
+
+TEST_CASE("ASCII OFF keeps file order and fan-triangulates polygons in face order", "[mesh_io]") {
+  TempDir dir;
+  const std::string path = dir.write("shapes.off",
+                                     "# a comment before the header\n"
+                                     "OFF\n"
+                                     "7 3 0\n"
+                                     "0 0 0\n"
+                                     "1 0 0   # trailing comment\n"
+                                     "1 1 0\n"
+                                     "\n"
+                                     "# whole-line comment between vertices\n"
+                                     "0 1 0\n"
+                                     "2 0.5 0\n"
+                                     "2.5 1.5 -1e-3\n"
+                                     "1.5 2 0.25\n"
+                                     "4 0 1 2 3\n"
+                                     "5 0 1 4 5 6\n"
+                                     "3 6 5 4\n");
+  const Mesh mesh = meshsweeper::readMesh(path);
+  CHECK(mesh.name == path);
+  REQUIRE(mesh.positions.size() == 7);
+  for (int v = 0; v < 4; ++v) CHECK(mesh.positions[v] == kSquare[v]);
+  CHECK(mesh.positions[4] == Vec3(2, 0.5, 0));
+  CHECK(mesh.positions[5] == Vec3(2.5, 1.5, -1e-3));
+  CHECK(mesh.positions[6] == Vec3(1.5, 2, 0.25));
+  const std::vector<Triangle> expected = {{0, 1, 2}, {0, 2, 3},              // quad
+                                          {0, 1, 4}, {0, 4, 5}, {0, 5, 6},  // pentagon
+                                          {6, 5, 4}};                        // triangle
+  CHECK(mesh.triangles == expected);
+}
+
+TEST_CASE("OFF header variants: counts on the keyword line, CRLF, COFF colours", "[mesh_io]") {
+  TempDir dir;
+  const std::vector<Triangle> expected = {{0, 1, 2}, {0, 2, 3}};
+  SECTION("counts on the keyword line, CRLF line ends") {
+    const Mesh mesh = meshsweeper::readMesh(
+        dir.write("crlf.off", "OFF 4 1 0\r\n0 0 0\r\n1 0 0\r\n1 1 0\r\n0 1 0\r\n4 0 1 2 3\r\n"));
+    CHECK(mesh.positions == kSquare);
+    CHECK(mesh.triangles == expected);
+  }
+  SECTION("COFF with vertex and face colours, no newline at the end") {
+    const Mesh mesh = meshsweeper::readMesh(dir.write(
+        "colour.off", "COFF\n4 1 0\n0 0 0 255 0 0 255\n1 0 0 0 255 0 255\n1 1 0 0 0 255 255\n"
+                      "0 1 0 9 9 9 255\n4 0 1 2 3 10 20 30"));
+    CHECK(mesh.positions == kSquare);
+    CHECK(mesh.triangles == expected);
+  }
+  SECTION("upper-case extension") {
+    const Mesh mesh =
+        meshsweeper::readMesh(dir.write("UPPER.OFF", "OFF\n3 1 0\n0 0 0\n1 0 0\n1 1 0\n3 0 1 2\n"));
+    CHECK(mesh.triangles.size() == 1);
+  }
+}
+
+TEST_CASE("degenerate triangles, duplicate and isolated vertices are valid input", "[mesh_io]") {
+  TempDir dir;
+  // Vertex 4 duplicates vertex 1; vertex 5 is used by no face; face 2 repeats an index;
+  // face 3 has collinear corners; face 4 has three coincident corners (1, 4 and 4).
+  const Mesh mesh = meshsweeper::readMesh(dir.write("odd.off",
+                                                    "OFF\n7 5 0\n"
+                                                    "0 0 0\n1 0 0\n0 1 0\n2 0 0\n"
+                                                    "1 0 0\n"
+                                                    "5 5 5\n"
+                                                    "3 0 0\n"
+                                                    "3 0 1 2\n"
+                                                    "3 2 4 0\n"
+                                                    "3 0 0 1\n"
+                                                    "3 0 1 3\n"
+                                                    "3 1 4 4\n"));
+  CHECK(mesh.positions.size() == 7);
+  CHECK(mesh.positions[4] == mesh.positions[1]);
+  CHECK(mesh.positions[5] == Vec3(5, 5, 5));
+  CHECK(mesh.positions[6] == Vec3(3, 0, 0));
+  const std::vector<Triangle> expected = {{0, 1, 2}, {2, 4, 0}, {0, 0, 1}, {0, 1, 3}, {1, 4, 4}};
+  CHECK(mesh.triangles == expected);
+}
+
+TEST_CASE("OBJ: order kept, v/vt/vn faces, negative indices, ignored statements", "[mesh_io]") {
+  TempDir dir;
+  const Mesh mesh = meshsweeper::readMesh(dir.write("square.obj",
+                                                    "# exported by hand\n"
+                                                    "mtllib none.mtl\n"
+                                                    "o square\n"
+                                                    "v 0 0 0\n"
+                                                    "v 1 0 0\n"
+                                                    "v 1 1 0\n"
+                                                    "v 0 1 0\n"
+                                                    "vt 0 0\nvn 0 0 1\n"
+                                                    "g group\ns off\nusemtl x\n"
+                                                    "f 1/1/1 2/1/1 3/1/1 4/1/1\n"
+                                                    "f -1 -2 -4\n"
+                                                    "f 1//1 3//1 4//1\n"));
+  CHECK(mesh.positions == kSquare);
+  const std::vector<Triangle> expected = {{0, 1, 2}, {0, 2, 3}, {3, 2, 0}, {0, 2, 3}};
+  CHECK(mesh.triangles == expected);
+}
+
+TEST_CASE("ASCII PLY: order kept, extra properties skipped, polygons fan-triangulated", "[mesh_io]") {
+  TempDir dir;
+  const Mesh mesh = meshsweeper::readMesh(dir.write("square.ply",
+                                                    "ply\n"
+                                                    "format ascii 1.0\n"
+                                                    "comment written by the test\n"
+                                                    "element vertex 5\n"
+                                                    "property float x\n"
+                                                    "property float y\n"
+                                                    "property double z\n"
+                                                    "property uchar red\n"
+                                                    "property float confidence\n"
+                                                    "element face 2\n"
+                                                    "property list uchar int vertex_indices\n"
+                                                    "property int flags\n"
+                                                    "element edge 1\n"
+                                                    "property int vertex1\n"
+                                                    "property int vertex2\n"
+                                                    "end_header\n"
+                                                    "0 0 0 255 0.5\n"
+                                                    "1 0 0 0 0.5\n"
+                                                    "1 1 0 1 1e-3\n"
+                                                    "0 1 0 2 -2\n"
+                                                    "0.5 0.5 0.25 3 0\n"
+                                                    "4 0 1 2 3 7\n"
+                                                    "3 4 3 2 -1\n"
+                                                    "0 1\n"));
+  REQUIRE(mesh.positions.size() == 5);
+  for (int v = 0; v < 4; ++v) CHECK(mesh.positions[v] == kSquare[v]);
+  CHECK(mesh.positions[4] == Vec3(0.5, 0.5, 0.25));
+  const std::vector<Triangle> expected = {{0, 1, 2}, {0, 2, 3}, {4, 3, 2}};
+  CHECK(mesh.triangles == expected);
+}
+
+TEST_CASE("binary PLY, little and big endian, float and double coordinates", "[mesh_io]") {
+  TempDir dir;
+  for (const bool big : {false, true}) {
+    for (const bool doubles : {false, true}) {
+      INFO("big endian " << big << ", double coordinates " << doubles);
+      std::string s = std::string("ply\nformat ") +
+                      (big ? "binary_big_endian" : "binary_little_endian") + " 1.0\n" +
+                      "element vertex 5\n" +
+                      (doubles ? "property double x\nproperty double y\nproperty double z\n"
+                               : "property float x\nproperty float y\nproperty float z\n") +
+                      "element face 2\nproperty list uchar uint vertex_indices\nend_header\n";
+      const std::vector<Vec3> positions = {kSquare[0], kSquare[1], kSquare[2], kSquare[3],
+                                           {0.5, 0.25, -0.125}};
+      for (const Vec3& p : positions)
+        for (int k = 0; k < 3; ++k) {
+          if (doubles) putF64(s, p[k], big);
+          else putF32(s, static_cast<float>(p[k]), big);
+        }
+      putU8(s, 5);
+      for (std::uint32_t v : {0u, 1u, 4u, 2u, 3u}) putU32(s, v, big);
+      putU8(s, 3);
+      for (std::uint32_t v : {4u, 3u, 2u}) putU32(s, v, big);
+      const Mesh mesh = meshsweeper::readMesh(dir.write("binary.ply", s));
+      CHECK(mesh.positions == positions);
+      const std::vector<Triangle> expected = {{0, 1, 4}, {0, 4, 2}, {0, 2, 3}, {4, 3, 2}};
+      CHECK(mesh.triangles == expected);
+    }
+  }
+}
+
+TEST_CASE("ASCII STL: CGAL merges equal points, in order of first appearance", "[mesh_io]") {
+  TempDir dir;
+  const Mesh mesh = meshsweeper::readMesh(dir.write("square.stl",
+                                                    "solid square\n"
+                                                    "facet normal 0 0 1\n outer loop\n"
+                                                    "  vertex 0 0 0\n  vertex 1 0 0\n  vertex 1 1 0\n"
+                                                    " endloop\nendfacet\n"
+                                                    "facet normal 0 0 1\n outer loop\n"
+                                                    "  vertex 0 0 0\n  vertex 1 1 0\n  vertex 0 1 0\n"
+                                                    " endloop\nendfacet\n"
+                                                    "endsolid square\n"));
+  CHECK(mesh.positions == kSquare);
+  const std::vector<Triangle> expected = {{0, 1, 2}, {0, 2, 3}};
+  CHECK(mesh.triangles == expected);
+}
+
+TEST_CASE("binary STL, also with a header that starts with 'solid'", "[mesh_io]") {
+  TempDir dir;
+  const std::vector<std::array<Vec3, 3>> triangles = {{kSquare[0], kSquare[1], kSquare[2]},
+                                                      {kSquare[0], kSquare[2], kSquare[3]}};
+  for (const std::string header : {"binary written by the test", "solid but binary"}) {
+    INFO(header);
+    const Mesh mesh = meshsweeper::readMesh(dir.write("square.stl", binaryStl(header, triangles, 2)));
+    CHECK(mesh.positions == kSquare);  // 6 corners in the file, 4 distinct points
+    const std::vector<Triangle> expected = {{0, 1, 2}, {0, 2, 3}};
+    CHECK(mesh.triangles == expected);
+  }
+}
+
+TEST_CASE("readMesh refuses missing, unreadable and unknown files with 'PATH: problem'",
+          "[mesh_io]") {
+  TempDir dir;
+  const std::string missing = dir.file("missing.off");
+  CHECK_THAT(readError(missing), StartsWith(missing + ": ") && Contains("no such file"));
+  CHECK_THAT(readError(dir.file("")), Contains("directory"));
+  const std::string empty = dir.write("empty.off", "");
+  CHECK_THAT(readError(empty), StartsWith(empty + ": ") && Contains("empty"));
+  const std::string unknown = dir.write("mesh.xyz", "OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n");
+  CHECK_THAT(readError(unknown), StartsWith(unknown + ": ") && Contains("unknown extension"));
+  CHECK_THAT(readError(dir.write("noextension", "OFF\n")), Contains("no file extension"));
+
+  const std::string locked = dir.write("locked.off", "OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n");
+  std::filesystem::permissions(locked, std::filesystem::perms::none);
+  if (geteuid() == 0) {
+    WARN("running as root: permissions do not stop reading, unreadable-file check skipped");
+  } else {
+    CHECK_THAT(readError(locked), StartsWith(locked + ": ") && Contains("cannot open"));
+  }
+  std::filesystem::permissions(locked, std::filesystem::perms::owner_all);
+}
+
+TEST_CASE("readMesh refuses garbage in every format", "[mesh_io]") {
+  TempDir dir;
+  std::string noise;
+  for (int i = 0; i < 3000; ++i) noise += static_cast<char>((i * 7919 + 13) % 251);
+  for (const char* ext : {".off", ".obj", ".ply", ".stl"}) {
+    for (const std::string& content : {noise, std::string("hello world\nthis is not a mesh\n")}) {
+      const std::string path = dir.write(std::string("garbage") + ext, content);
+      INFO(path);
+      CHECK_THAT(readError(path), StartsWith(path + ": "));
+    }
+  }
+  CHECK_THAT(readError(dir.write("words.off", "OFF\n3 1 0\n0 0 0\n1 zero 0\n0 1 0\n3 0 1 2\n")),
+             Contains("line 4: vertex 1") && Contains("'zero'"));
+  CHECK_THAT(readError(dir.write("short.off", "OFF\n3 1 0\n0 0 0\n1 0\n0 1 0\n3 0 1 2\n")),
+             Contains("fewer than 3 coordinates"));
+  CHECK_THAT(readError(dir.write("skel.off", "SKEL\n3 1\n0 0 0\n1 0 0\n0 1 0\n2 0 1\n")),
+             Contains("SKEL"));
+  CHECK_THAT(readError(dir.write("noedges.off", "OFF\n3 1\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n")),
+             Contains("no edge count"));
+  CHECK_THAT(readError(dir.write("bad.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nl 1 2\nf 1 2 3\n")),
+             Contains("line 4") && Contains("'l'"));
+  CHECK_THAT(readError(dir.write("short.obj", "v 0 0 0\nv 1 0\nv 0 1 0\nf 1 2 3\n")),
+             Contains("line 2") && Contains("fewer than 3"));
+  CHECK_THAT(readError(dir.write("bad.stl", "solid x\nfacet normal 0 0 1\nouter loop\n"
+                                            "vertex 0 0 0\nvertex 1 0 0\nendloop\nendfacet\n"
+                                            "endsolid x\n")),
+             Contains("malformed ASCII STL"));
+  // Binary OFF: CGAL 5.5's soup reader misreads it, so it is refused outright.
+  std::string binary_off = "OFF BINARY\n";
+  for (std::uint32_t v : {3u, 1u, 0u}) putU32(binary_off, v, true);
+  for (float c : {0.f, 0.f, 0.f, 1.f, 0.f, 0.f, 0.f, 1.f, 0.f}) putF32(binary_off, c, true);
+  for (std::uint32_t v : {3u, 0u, 1u, 2u, 0u}) putU32(binary_off, v, true);
+  CHECK_THAT(readError(dir.write("binary.off", binary_off)), Contains("binary OFF"));
+}
+
+TEST_CASE("readMesh refuses PLY headers it cannot read safely", "[mesh_io]") {
+  TempDir dir;
+  const std::string start = "ply\nformat ascii 1.0\nelement vertex 3\n";
+  const std::string body = "0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n";
+  const std::string faces = "element face 1\nproperty list uchar int vertex_indices\n";
+  // CGAL 5.5 dereferences a null pointer on integer coordinates.
+  CHECK_THAT(readError(dir.write("int.ply", start + "property int x\nproperty int y\nproperty int z\n" +
+                                                faces + "end_header\n" + body)),
+             Contains("only float or double"));
+  CHECK_THAT(readError(dir.write("noz.ply", start + "property float x\nproperty float y\n" + faces +
+                                                "end_header\n0 0\n1 0\n0 1\n3 0 1 2\n")),
+             Contains("no 'z'"));
+  const std::string xyz = "property float x\nproperty float y\nproperty float z\n";
+  CHECK_THAT(readError(dir.write("type.ply", start + xyz + "property uint64 id\n" + faces +
+                                                 "end_header\n" + body)),
+             Contains("unknown type 'uint64'"));
+  CHECK_THAT(readError(dir.write("short_index.ply",
+                                 start + xyz +
+                                     "element face 1\nproperty list uchar ushort vertex_indices\n"
+                                     "end_header\n" + body)),
+             Contains("vertex_indices"));
+  CHECK_THAT(readError(dir.write("noend.ply", start + xyz + faces)),
+             Contains("end_header"));
+  CHECK_THAT(readError(dir.write("nofaces.ply", start + xyz + "end_header\n0 0 0\n1 0 0\n0 1 0\n")),
+             Contains("no faces"));
+  CHECK_THAT(readError(dir.write("word.ply", start + xyz + faces + "end_header\n0 0 0\n1 x 0\n0 1 0\n3 0 1 2\n")),
+             Contains("item 1") && Contains("'x' is not a number"));
+  CHECK_THAT(readError(dir.write("inf.ply", start + xyz + faces + "end_header\n0 0 0\n1 inf 0\n0 1 0\n3 0 1 2\n")),
+             Contains("'inf' is not finite"));
+}
+
+TEST_CASE("readMesh refuses truncated files", "[mesh_io]") {
+  TempDir dir;
+  // Short enough for the header check.
+  const std::string off = dir.write("cut.off", "OFF\n4 2 0\n0 0 0\n1 0 0\n1 1 0\n");
+  CHECK_THAT(readError(off), StartsWith(off + ": ") && Contains("truncated"));
+  // Long lines pass the header check; the body scan names what is missing.
+  CHECK_THAT(readError(dir.write("cut2.off", "OFF\n4 2 0\n0.000000 0.000000 0.000000\n"
+                                             "1.000000 0.000000 0.000000\n1.000000 1.000000 0.000000\n"
+                                             "0.000000 1.000000 0.000000\n3 0 1 2\n")),
+             Contains("ends after 1 face of the 2 declared"));
+  CHECK_THAT(readError(dir.write("cut3.off", "OFF\n4 2 0\n0.000000 0.000000 0.000000\n"
+                                             "1.000000 0.000000 0.000000\n1.000000 1.000000 0.000000\n"
+                                             "0.000000 1.000000 0.000000\n3 0 1 2\n3 0 2\n")),
+             Contains("line 8: face 1 declares 3 corners but lists 2 indices"));
+
+  std::string ply = "ply\nformat binary_little_endian 1.0\nelement vertex 3\nproperty float x\n"
+                    "property float y\nproperty float z\nelement face 1\n"
+                    "property list uchar int vertex_indices\nend_header\n";
+  for (int k = 0; k < 9; ++k) putF32(ply, static_cast<float>(k));
+  putU8(ply, 3);
+  putU32(ply, 0);
+  putU32(ply, 1);  // one index missing
+  CHECK_THAT(readError(dir.write("cut.ply", ply)), Contains("list 'vertex_indices'"));
+  CHECK_THAT(readError(dir.write("cut_ascii.ply",
+                                 "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\n"
+                                 "property float y\nproperty float z\nelement face 1\n"
+                                 "property list uchar int vertex_indices\nend_header\n"
+                                 "0 0 0\n1 0 0\n0 1 0\n3 0 1\n")),
+             Contains("ends inside PLY element 'face' item 0"));
+
+  const std::vector<std::array<Vec3, 3>> one = {{kSquare[0], kSquare[1], kSquare[2]}};
+  std::string stl = binaryStl("binary", one, 2);  // declares 2, holds 1
+  CHECK_THAT(readError(dir.write("cut.stl", stl)), Contains("declares 2 triangles") && Contains("truncated"));
+  stl = binaryStl("binary", one, 1);
+  stl.resize(stl.size() - 10);
+  CHECK_THAT(readError(dir.write("cut2.stl", stl)), Contains("truncated"));
+  CHECK_THAT(readError(dir.write("tiny.stl", "abc")), Contains("too short for a binary STL"));
+  CHECK_THAT(readError(dir.write("cut_ascii.stl", "solid x\nfacet normal 0 0 1\nouter loop\n"
+                                                  "vertex 0 0 0\nvertex 1 0 0\n")),
+             Contains("truncated"));
+}
+
+TEST_CASE("readMesh refuses absurd counts before allocating for them", "[mesh_io]") {
+  TempDir dir;
+  const std::string off = dir.write("huge.off", "OFF 1000000000000 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n");
+  CHECK_THAT(readError(off), StartsWith(off + ": ") && Contains("1000000000000 vertices"));
+  CHECK_THAT(readError(dir.write("huge_faces.off", "OFF\n3 2000000000 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n")),
+             Contains("2000000000 faces"));
+  CHECK_THAT(readError(dir.write("huge_count.off", "OFF\n3 99999999999999999999 0\n0 0 0\n")),
+             Contains("face count"));
+  CHECK_THAT(readError(dir.write("huge_face.off", "OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n1000000000 0 1 2\n")),
+             Contains("1000000000 corners"));
+
+  const std::string ascii_ply = dir.write(
+      "huge.ply", "ply\nformat ascii 1.0\nelement vertex 1000000000000\nproperty float x\n"
+                  "property float y\nproperty float z\nelement face 1\n"
+                  "property list uchar int vertex_indices\nend_header\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n");
+  CHECK_THAT(readError(ascii_ply), StartsWith(ascii_ply + ": ") && Contains("1000000000000 items"));
+
+  std::string ply = "ply\nformat binary_little_endian 1.0\nelement vertex 1000000000000\n"
+                    "property float x\nproperty float y\nproperty float z\nelement face 1\n"
+                    "property list uchar int vertex_indices\nend_header\n";
+  for (int k = 0; k < 9; ++k) putF32(ply, static_cast<float>(k));
+  CHECK_THAT(readError(dir.write("huge_binary.ply", ply)), Contains("1000000000000 items"));
+
+  // A list length CGAL would resize to (1.6 GB) before finding the file short.
+  std::string list = "ply\nformat binary_little_endian 1.0\nelement vertex 3\nproperty float x\n"
+                     "property float y\nproperty float z\nelement face 1\n"
+                     "property list uint int vertex_indices\nend_header\n";
+  for (int k = 0; k < 9; ++k) putF32(list, static_cast<float>(k));
+  putU32(list, 400000000);
+  for (std::uint32_t v : {0u, 1u, 2u}) putU32(list, v);
+  CHECK_THAT(readError(dir.write("huge_list.ply", list)), Contains("declares 400000000 entries"));
+  CHECK_THAT(readError(dir.write("huge_list_ascii.ply",
+                                 "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\n"
+                                 "property float y\nproperty float z\nelement face 1\n"
+                                 "property list uint int vertex_indices\nend_header\n"
+                                 "0 0 0\n1 0 0\n0 1 0\n4000000000 0 1 2\n")),
+             Contains("declares 4000000000 entries"));
+
+  const std::vector<std::array<Vec3, 3>> one = {{kSquare[0], kSquare[1], kSquare[2]}};
+  CHECK_THAT(readError(dir.write("huge.stl", binaryStl("binary", one, 4000000000u))),
+             Contains("declares 4000000000 triangles"));
+}
+
+TEST_CASE("readMesh refuses non-finite coordinates", "[mesh_io]") {
+  TempDir dir;
+  const float nan = std::numeric_limits<float>::quiet_NaN();
+  const float inf = std::numeric_limits<float>::infinity();
+  CHECK_THAT(readError(dir.write("nan.off", "OFF\n3 1 0\n0 0 0\n1 nan 0\n0 1 0\n3 0 1 2\n")),
+             Contains("vertex 1") && Contains("not a finite number"));
+  CHECK_THAT(readError(dir.write("big.off", "OFF\n3 1 0\n0 0 0\n1 1e999 0\n0 1 0\n3 0 1 2\n")),
+             Contains("vertex 1") && Contains("not a finite number"));
+  // Homogeneous OFF with w = 0: CGAL divides by it.
+  const std::string homogeneous =
+      dir.write("w0.off", "4OFF\n3 1 0\n0 0 0 1\n1 0 0 0\n0 1 0 1\n3 0 1 2\n");
+  // (With CGAL assertions on, as in a Debug build, CGAL's own check w != 0 fires first.)
+  CHECK_THAT(readError(homogeneous),
+             StartsWith(homogeneous + ": ") &&
+                 (Contains("vertex 1 has a non-finite coordinate") || Contains("w != 0")));
+  CHECK_THAT(readError(dir.write("nan.obj", "v 0 0 0\nv 1 0 nan\nv 0 1 0\nf 1 2 3\n")),
+             Contains("line 2: vertex 1"));
+  for (const float bad : {nan, inf, -inf}) {
+    std::string ply = "ply\nformat binary_little_endian 1.0\nelement vertex 3\nproperty float x\n"
+                      "property float y\nproperty float z\nelement face 1\n"
+                      "property list uchar int vertex_indices\nend_header\n";
+    for (float c : {0.f, 0.f, 0.f, 1.f, 0.f, 0.f, 0.f, 1.f, bad}) putF32(ply, c);
+    putU8(ply, 3);
+    for (std::uint32_t v : {0u, 1u, 2u}) putU32(ply, v);
+    CHECK_THAT(readError(dir.write("nan.ply", ply)), Contains("vertex 2 has a non-finite coordinate"));
+    const std::vector<std::array<Vec3, 3>> one = {{kSquare[0], Vec3(1, bad, 0), kSquare[2]}};
+    CHECK_THAT(readError(dir.write("nan.stl", binaryStl("binary", one, 1))),
+               Contains("triangle 0 has a non-finite coordinate"));
+  }
+}
+
+TEST_CASE("readMesh refuses out-of-range indices and faces with fewer than 3 corners",
+          "[mesh_io]") {
+  TempDir dir;
+  CHECK_THAT(readError(dir.write("range.off", "OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 5\n")),
+             Contains("line 6: face 0 uses vertex 5 but the file has 3 vertices"));
+  CHECK_THAT(readError(dir.write("negative.off", "OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 -1 2\n")),
+             Contains("face 0 uses vertex -1"));
+  // CGAL's OBJ reader lets index n+1 (one past the end) through; readMesh does not.
+  CHECK_THAT(readError(dir.write("range.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 4\n")),
+             Contains("face 0 uses vertex 3 but the file has 3 vertices"));
+  CHECK_THAT(readError(dir.write("range2.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\nf 1 2 9\n")),
+             Contains("line 5: face 1 uses OBJ index 9 but the file has 3 vertices"));
+  const std::string ply_start = "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\n"
+                                "property float y\nproperty float z\nelement face 1\n"
+                                "property list uchar int vertex_indices\nend_header\n"
+                                "0 0 0\n1 0 0\n0 1 0\n";
+  CHECK_THAT(readError(dir.write("range.ply", ply_start + "3 0 1 3\n")),
+             Contains("face 0 uses vertex 3 but the file has 3 vertices"));
+  CHECK_THAT(readError(dir.write("negative.ply", ply_start + "3 0 -1 2\n")),
+             Contains("face 0 uses vertex"));
+  CHECK_THAT(readError(dir.write("two.off", "OFF\n3 2 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n2 0 1\n")),
+             Contains("face 1 has 2 corners (at least 3 needed)"));
+  CHECK_THAT(readError(dir.write("zero.off", "OFF\n3 2 0\n0 0 0.5\n1 0 0.5\n0 1 0.5\n3 0 1 2\n0\n")),
+             Contains("face 1 has 0 corners"));
+  CHECK_THAT(readError(dir.write("two.ply", ply_start + "2 0 1\n")),
+             Contains("face 0 has 2 corners"));
+}
+
+TEST_CASE("readMesh refuses meshes without faces", "[mesh_io]") {
+  TempDir dir;
+  const std::string off = dir.write("points.off", "OFF\n3 0 0\n0 0 0\n1 0 0\n0 1 0\n");
+  CHECK_THAT(readError(off), StartsWith(off + ": ") && Contains("no faces"));
+  CHECK_THAT(readError(dir.write("points.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\n")), Contains("no faces"));
+  CHECK_THAT(readError(dir.write("empty.stl", "solid empty\nendsolid empty\n")), Contains("no faces"));
+  CHECK_THAT(readError(dir.write("empty_binary.stl", binaryStl("binary", {}, 0))),
+             Contains("no faces"));
+  CHECK_THAT(readError(dir.write("spaces.stl", "   \n\n")), StartsWith(dir.file("spaces.stl")));
+}
+
+TEST_CASE("writeOff writes what readMesh reads back exactly", "[mesh_io]") {
+  TempDir dir;
+  Mesh mesh;
+  mesh.name = "awkward";
+  mesh.positions = {{0.1, 1.0 / 3.0, -0.0}, {1e-300, -2.5e17, 123456789.123456789},
+                    {std::nextafter(1.0, 2.0), 0, 0}, {7, 7, 7}};
+  mesh.triangles = {{0, 1, 2}, {2, 1, 0}, {0, 0, 2}};
+  const std::string path = dir.file("out.off");
+  meshsweeper::writeOff(mesh, path);
+  const Mesh back = meshsweeper::readMesh(path);
+  CHECK(back.positions == mesh.positions);  // isolated vertex 3 kept too
+  CHECK(back.triangles == mesh.triangles);
+  CHECK_THROWS_AS(meshsweeper::writeOff(mesh, dir.file("no/such/folder/out.off")), MeshError);
+}
+
+TEST_CASE("readPoints: one point a line, comments and blank lines ignored", "[mesh_io]") {
+  TempDir dir;
+  const std::string path = dir.write("points.txt",
+                                     "# query points\n"
+                                     "0 0 0\n"
+                                     "\n"
+                                     "  1.5\t-2e3  +3   # trailing comment\n"
+                                     "   \t \n"
+                                     "1e-400 .5 -0.25\r\n"
+                                     "7 8 9");
+  const std::vector<Vec3> points = meshsweeper::readPoints(path);
+  const std::vector<Vec3> expected = {{0, 0, 0}, {1.5, -2000, 3}, {0, 0.5, -0.25}, {7, 8, 9}};
+  CHECK(points == expected);
+  CHECK(meshsweeper::readPoints(dir.write("empty.txt", "")).empty());
+}
+
+TEST_CASE("readPoints refuses malformed lines with 'PATH:LINE: problem'", "[mesh_io]") {
+  TempDir dir;
+  const std::string two = dir.write("two.txt", "0 0 0\n# comment\n1 2\n");
+  CHECK_THAT(pointsError(two), StartsWith(two + ":3: ") && Contains("found 2 fields"));
+  const std::string four = dir.write("four.txt", "1 2 3 4\n");
+  CHECK_THAT(pointsError(four), StartsWith(four + ":1: ") && Contains("found 4 fields"));
+  const std::string word = dir.write("word.txt", "1 2 3\n1 two 3\n");
+  CHECK_THAT(pointsError(word), StartsWith(word + ":2: ") && Contains("'two' is not a number"));
+  const std::string comma = dir.write("comma.txt", "1,2,3\n");
+  CHECK_THAT(pointsError(comma), StartsWith(comma + ":1: "));
+  for (const char* bad : {"nan", "inf", "-inf", "1e999"}) {
+    const std::string path = dir.write("bad.txt", std::string("0 0 ") + bad + "\n");
+    CHECK_THAT(pointsError(path), StartsWith(path + ":1: ") && Contains("not finite"));
+  }
+  const std::string missing = dir.file("missing.txt");
+  CHECK_THAT(pointsError(missing), StartsWith(missing + ": ") && Contains("no such file"));
+}
+
+TEST_CASE("readPoints reads standard input for '-'", "[mesh_io]") {
+  std::istringstream input("1 2 3\n# comment\n4 5 6\n");
+  std::streambuf* saved = std::cin.rdbuf(input.rdbuf());
+  std::vector<Vec3> points;
+  std::string error;
+  try {
+    points = meshsweeper::readPoints("-");
+  } catch (const MeshError& e) {
+    error = e.what();
+  }
+  std::cin.rdbuf(saved);
+  CHECK(error.empty());
+  const std::vector<Vec3> expected = {{1, 2, 3}, {4, 5, 6}};
+  CHECK(points == expected);
+
+  std::istringstream bad("1 2 3\nx\n");
+  saved = std::cin.rdbuf(bad.rdbuf());
+  try {
+    meshsweeper::readPoints("-");
+  } catch (const MeshError& e) {
+    error = e.what();
+  }
+  std::cin.rdbuf(saved);
+  CHECK_THAT(error, StartsWith("<stdin>:2: "));
+}
+
+TEST_CASE("real meshes from data/meshes load with their file counts", "[mesh_io][data]") {
+  struct Expected {
+    const char* name;
+    size_t vertices;
+    size_t triangles;
+  };
+  const Expected meshes[] = {{"armadillo", 26002, 52000},        {"bunny00", 37706, 75408},
+                             {"refined_elephant", 44460, 88928}, {"holes", 4291, 8288},
+                             {"mannequin-devil", 12977, 25888}};
+  for (const Expected& e : meshes) {
+    const std::string path = std::string(MESHSWEEPER_DATA_DIR) + "/" + e.name + ".off";
+    if (!std::filesystem::exists(path)) {
+      WARN(path << " missing (run scripts/fetch_data.sh): skipped");
+      continue;
+    }
+    INFO(path);
+    const Mesh mesh = meshsweeper::readMesh(path);
+    CHECK(mesh.positions.size() == e.vertices);
+    CHECK(mesh.triangles.size() == e.triangles);
+  }
+}
