@@ -1,0 +1,537 @@
+// Closest point on a triangle: exact hand-made cases for every feature in all six vertex orders,
+// degenerate and near-degenerate triangles and random triangles against an independent
+// reference in 113-bit (or long double) arithmetic, and the 8-wide block against the scalar
+// function.
+#include "core/triangle_distance.h"
+
+#include <catch2/catch.hpp>
+#include <Eigen/Geometry>
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <limits>
+#include <random>
+#include <sstream>
+#include <string>
+#include <vector>
+
+using namespace meshsweeper;
+
+namespace {
+
+constexpr double kEps = std::numeric_limits<double>::epsilon();
+
+// ---------------------------------------------------------------------------------------------
+// Independent reference: the closest of the three segments, or the projection onto the plane
+// when it falls inside the triangle, computed in extended precision.
+
+#ifdef __SIZEOF_FLOAT128__
+using Exact = __float128;
+#else
+using Exact = long double;
+#endif
+
+struct X3 {
+  Exact x, y, z;
+};
+X3 toExact(const Vec3& v) { return {v.x(), v.y(), v.z()}; }
+X3 operator-(const X3& a, const X3& b) { return {a.x - b.x, a.y - b.y, a.z - b.z}; }
+X3 operator+(const X3& a, const X3& b) { return {a.x + b.x, a.y + b.y, a.z + b.z}; }
+X3 operator*(Exact s, const X3& a) { return {s * a.x, s * a.y, s * a.z}; }
+Exact dotExact(const X3& a, const X3& b) { return a.x * b.x + a.y * b.y + a.z * b.z; }
+X3 crossExact(const X3& a, const X3& b) {
+  return {a.y * b.z - a.z * b.y, a.z * b.x - a.x * b.z, a.x * b.y - a.y * b.x};
+}
+
+Exact referenceSegment(const X3& p, const X3& u, const X3& v) {
+  const X3 d = v - u;
+  const Exact len = dotExact(d, d);
+  Exact t = 0;
+  if (len > 0) t = std::min<Exact>(std::max<Exact>(dotExact(p - u, d) / len, 0), 1);
+  const X3 r = p - (u + t * d);
+  return dotExact(r, r);
+}
+
+// Squared distance from p to triangle (a, b, c), rounded to double at the end.
+double referenceSquared(const Vec3& pe, const Vec3& ae, const Vec3& be, const Vec3& ce) {
+  const X3 p = toExact(pe), a = toExact(ae), b = toExact(be), c = toExact(ce);
+  Exact best = std::min(referenceSegment(p, a, b),
+                        std::min(referenceSegment(p, b, c), referenceSegment(p, c, a)));
+  const X3 n = crossExact(b - a, c - a);
+  const Exact nn = dotExact(n, n);
+  if (nn > 0) {
+    const Exact h = dotExact(p - a, n);
+    const X3 q = p - (h / nn) * n;
+    const bool inside = dotExact(crossExact(b - a, q - a), n) >= 0 &&
+                        dotExact(crossExact(c - b, q - b), n) >= 0 &&
+                        dotExact(crossExact(a - c, q - c), n) >= 0;
+    if (inside) best = std::min(best, h * h / nn);
+  }
+  return static_cast<double>(best);
+}
+
+// ---------------------------------------------------------------------------------------------
+// Checks shared by every case.
+
+std::string describe(const Vec3& p, const Vec3& a, const Vec3& b, const Vec3& c) {
+  std::ostringstream s;
+  s.precision(17);
+  s << "p = (" << p.transpose() << ")  a = (" << a.transpose() << ")  b = (" << b.transpose()
+    << ")  c = (" << c.transpose() << ")";
+  return s.str();
+}
+
+double maxAbs(const Vec3& p, const Vec3& a, const Vec3& b, const Vec3& c) {
+  return std::max({p.cwiseAbs().maxCoeff(), a.cwiseAbs().maxCoeff(), b.cwiseAbs().maxCoeff(),
+                   c.cwiseAbs().maxCoeff()});
+}
+
+// Why the result is inconsistent, or "" when it is finite, its barycentric coordinates are
+// valid, agree with the feature and give the returned point, the point lies on the triangle, the
+// squared distance is |p - point|^2 and squaredDistanceToTriangle agrees (relative 1e-14).
+std::string inconsistency(const TriangleClosest& r, const Vec3& p, const Vec3& a, const Vec3& b,
+                          const Vec3& c) {
+  const double m = maxAbs(p, a, b, c);
+  if (!std::isfinite(r.squared_distance) || !r.point.allFinite() || !r.barycentric.allFinite())
+    return "not finite";
+  if (r.barycentric.minCoeff() < 0.0) return "negative barycentric coordinate";
+  if (std::abs(r.barycentric.sum() - 1.0) > 4 * kEps) return "barycentric sum is not 1";
+  const Vec3 combined = r.barycentric[0] * a + r.barycentric[1] * b + r.barycentric[2] * c;
+  if ((combined - r.point).cwiseAbs().maxCoeff() > 8 * kEps * m)
+    return "point != b0*a + b1*b + b2*c";
+  if (std::abs(r.squared_distance - (p - r.point).squaredNorm()) > 4 * kEps * r.squared_distance)
+    return "squared distance != |p - point|^2";
+  if (referenceSquared(r.point, a, b, c) > (16 * kEps * m) * (16 * kEps * m))
+    return "point is off the triangle";
+  const int f = static_cast<int>(r.feature);
+  if (f < 3) {
+    if (r.barycentric[f] != 1.0) return "vertex feature without barycentric 1";
+    if (r.point != (f == 0 ? a : (f == 1 ? b : c))) return "vertex feature, point != vertex";
+  } else if (f < 6) {
+    if (r.barycentric[(f - 3 + 2) % 3] != 0.0) return "edge feature, opposite corner weighs";
+  }
+  const double only = squaredDistanceToTriangle(p, a, b, c);
+  if (std::abs(only - r.squared_distance) > 1e-14 * r.squared_distance)
+    return "squaredDistanceToTriangle disagrees";
+  return {};
+}
+
+// Checks inconsistency() in a Catch section, with the case described only on failure.
+#define CHECK_CONSISTENT(r, p, a, b, c, context)        \
+  do {                                                  \
+    const std::string why = inconsistency(r, p, a, b, c); \
+    if (!why.empty()) {                                 \
+      INFO(context << " " << describe(p, a, b, c));     \
+      FAIL_CHECK(why);                                  \
+    }                                                   \
+  } while (false)
+
+// CHECK(cond) that builds its message only when cond fails (the loops run ~10^5 cases).
+#define CHECK_WITH(cond, context) \
+  do {                            \
+    if (!(cond)) {                \
+      INFO(context);              \
+      CHECK(cond);                \
+    }                             \
+  } while (false)
+
+// Agreement with the reference: relative 1e-12, plus the rounding of the returned point's
+// coordinates (eps * |coordinates| each, moving the distance by about that much), which is
+// larger than 1e-12 of the distance near the surface when the coordinates are far from the
+// origin (about a fifth of the random cases need it; the largest error seen is 1.7 eps *
+// |coordinates| * distance).
+bool agrees(double value, double reference, double coordinate_scale) {
+  const double rounding = 4 * kEps * coordinate_scale * std::sqrt(reference);
+  return std::abs(value - reference) <= 1e-12 * reference + rounding;
+}
+
+// ---------------------------------------------------------------------------------------------
+// Hand-made cases: triangle A = (0,0,0), B = (4,0,0), C = (0,4,0) (all answers exact in binary).
+
+struct Expected {
+  const char* name;
+  Vec3 p;
+  Vec3 point;
+  Vec3 barycentric;  // over (A, B, C)
+  int feature;       // over (A, B, C): 0..2 vertex, 3 AB, 4 BC, 5 CA, 6 face
+  double squared_distance;
+};
+
+std::vector<Expected> handMadeCases() {
+  return {
+      {"vertex A region", {-1, -1, 2}, {0, 0, 0}, {1, 0, 0}, 0, 6},
+      {"vertex B region", {6, -1, 1}, {4, 0, 0}, {0, 1, 0}, 1, 6},
+      {"vertex C region", {-1, 6, -3}, {0, 4, 0}, {0, 0, 1}, 2, 14},
+      {"edge AB region", {1, -2, 2}, {1, 0, 0}, {0.75, 0.25, 0}, 3, 8},
+      {"edge BC region", {3, 3, 1}, {2, 2, 0}, {0, 0.5, 0.5}, 4, 3},
+      {"edge CA region", {-3, 1, 1}, {0, 1, 0}, {0.75, 0, 0.25}, 5, 10},
+      {"face region", {1, 1, 5}, {1, 1, 0}, {0.5, 0.25, 0.25}, 6, 25},
+      {"face region below", {1, 2, -3}, {1, 2, 0}, {0.25, 0.25, 0.5}, 6, 9},
+      {"on the plane inside", {1, 2, 0}, {1, 2, 0}, {0.25, 0.25, 0.5}, 6, 0},
+      {"on the plane beyond BC", {3, 3, 0}, {2, 2, 0}, {0, 0.5, 0.5}, 4, 2},
+      {"on the plane beyond A", {-2, -1, 0}, {0, 0, 0}, {1, 0, 0}, 0, 5},
+      {"exactly on edge AB", {2, 0, 0}, {2, 0, 0}, {0.5, 0.5, 0}, 3, 0},
+      {"exactly on edge BC", {1, 3, 0}, {1, 3, 0}, {0, 0.25, 0.75}, 4, 0},
+      {"exactly on edge CA", {0, 3, 0}, {0, 3, 0}, {0.25, 0, 0.75}, 5, 0},
+      {"exactly on vertex A", {0, 0, 0}, {0, 0, 0}, {1, 0, 0}, 0, 0},
+      {"exactly on vertex B", {4, 0, 0}, {4, 0, 0}, {0, 1, 0}, 1, 0},
+      {"exactly on vertex C", {0, 4, 0}, {0, 4, 0}, {0, 0, 1}, 2, 0},
+  };
+}
+
+// The feature of a triangle given as corners (X0, X1, X2) = (P[order[0]], P[order[1]],
+// P[order[2]]) for a feature named over (P0, P1, P2) = (A, B, C).
+Feature permutedFeature(int feature, const std::array<int, 3>& order) {
+  auto position = [&](int corner) {
+    return static_cast<int>(std::find(order.begin(), order.end(), corner) - order.begin());
+  };
+  if (feature < 3) return static_cast<Feature>(position(feature));
+  if (feature == 6) return Feature::kFace;
+  const int i = position(feature - 3), j = position((feature - 3 + 1) % 3);
+  const int lo = std::min(i, j), hi = std::max(i, j);
+  if (lo == 0 && hi == 1) return Feature::kEdge01;
+  if (lo == 1 && hi == 2) return Feature::kEdge12;
+  return Feature::kEdge20;
+}
+
+const char* featureName(Feature f) {
+  static const char* names[] = {"vertex0", "vertex1", "vertex2", "edge01",
+                                "edge12",  "edge20",  "face"};
+  return names[static_cast<int>(f)];
+}
+
+// Runs every hand-made case on the triangle mapped by `map` (applied to corners, queries and
+// expected points) in all six vertex orders.
+template <class Map>
+void checkHandMade(const Map& map, double tolerance) {
+  const Vec3 corners[3] = {map(Vec3(0, 0, 0)), map(Vec3(4, 0, 0)), map(Vec3(0, 4, 0))};
+  std::array<int, 3> order = {0, 1, 2};
+  do {
+    const Vec3& x0 = corners[order[0]];
+    const Vec3& x1 = corners[order[1]];
+    const Vec3& x2 = corners[order[2]];
+    for (const Expected& e : handMadeCases()) {
+      const Vec3 p = map(e.p);
+      const Vec3 point = map(e.point);
+      const Feature feature = permutedFeature(e.feature, order);
+      INFO(e.name << ", order " << order[0] << order[1] << order[2] << ", "
+                  << describe(p, x0, x1, x2) << ", expected " << featureName(feature));
+      const TriangleClosest r = closestPointOnTriangle(p, x0, x1, x2);
+      INFO("got " << featureName(r.feature) << " point (" << r.point.transpose() << ") bary ("
+                  << r.barycentric.transpose() << ") d2 " << r.squared_distance);
+      // Rounded copies of "exactly on" cases may land a rounding off the boundary, on either side.
+      const bool on_boundary = std::string(e.name).rfind("exactly on", 0) == 0;
+      if (tolerance == 0.0 || !on_boundary) CHECK(r.feature == feature);
+      CHECK((r.point - point).cwiseAbs().maxCoeff() <= tolerance);
+      for (int k = 0; k < 3; ++k)
+        CHECK(std::abs(r.barycentric[k] - e.barycentric[order[k]]) <= tolerance);
+      CHECK(std::abs(r.squared_distance - e.squared_distance) <=
+            tolerance * (1 + e.squared_distance));
+      CHECK_CONSISTENT(r, p, x0, x1, x2, e.name);
+    }
+  } while (std::next_permutation(order.begin(), order.end()));
+}
+
+Vec3 randomVector(std::mt19937_64& rng, double scale) {
+  std::uniform_real_distribution<double> u(-scale, scale);
+  return Vec3(u(rng), u(rng), u(rng));
+}
+
+Vec3 randomPointOn(std::mt19937_64& rng, const Vec3& a, const Vec3& b, const Vec3& c) {
+  std::uniform_real_distribution<double> u(0, 1);
+  double s = u(rng), t = u(rng);
+  if (s + t > 1) {
+    s = 1 - s;
+    t = 1 - t;
+  }
+  return a + s * (b - a) + t * (c - a);
+}
+
+Eigen::Matrix3d randomRotation(std::mt19937_64& rng) {
+  std::normal_distribution<double> g(0, 1);
+  Eigen::Quaterniond q(g(rng), g(rng), g(rng), g(rng));
+  q.normalize();
+  return q.toRotationMatrix();
+}
+
+// A query point for triangle (a, b, c) at `scale`: uniform in a box around it, or close to the
+// surface (a point of the triangle moved by a random offset of random magnitude).
+Vec3 randomQuery(std::mt19937_64& rng, const Vec3& a, const Vec3& b, const Vec3& c,
+                 const Vec3& center, double scale) {
+  std::uniform_int_distribution<int> kind(0, 2);
+  std::uniform_real_distribution<double> u(0, 1);
+  switch (kind(rng)) {
+    case 0:
+      return center + randomVector(rng, 2 * scale);
+    case 1:
+      return randomPointOn(rng, a, b, c) + randomVector(rng, scale * std::pow(10.0, -6 * u(rng)));
+    default: {
+      // Near an edge or a vertex.
+      const Vec3 corners[3] = {a, b, c};
+      const int i = std::uniform_int_distribution<int>(0, 2)(rng);
+      const Vec3 on = corners[i] + u(rng) * (corners[(i + 1) % 3] - corners[i]);
+      return on + randomVector(rng, scale * std::pow(10.0, -4 * u(rng)));
+    }
+  }
+}
+
+}  // namespace
+
+TEST_CASE("closest point: every feature in all six vertex orders", "[triangle_distance]") {
+  SECTION("triangle in the plane z = 0") {
+    checkHandMade([](const Vec3& v) { return v; }, 0.0);
+  }
+  SECTION("moved by an exact signed axis permutation and translation") {
+    checkHandMade([](const Vec3& v) { return Vec3(v.z() + 1, -v.x() + 2, v.y() - 3); }, 0.0);
+  }
+  SECTION("rotated and moved (rounded)") {
+    std::mt19937_64 rng(11);
+    for (int i = 0; i < 8; ++i) {
+      const Eigen::Matrix3d rotation = randomRotation(rng);
+      const Vec3 shift = randomVector(rng, 10);
+      INFO("rotation " << i);
+      checkHandMade([&](const Vec3& v) -> Vec3 { return rotation * v + shift; }, 1e-13);
+    }
+  }
+}
+
+TEST_CASE("closest point: a known failure of plain region tests", "[triangle_distance]") {
+  // A == B: the region test for edge AB passes with |AB| = 0; the answer is on edge CA.
+  const Vec3 a(0, 0, 0), b(0, 0, 0), c(4, 0, 0), p(2, 1, 0);
+  for (int rotation = 0; rotation < 3; ++rotation) {
+    const Vec3 corners[3] = {a, b, c};
+    const Vec3& x0 = corners[rotation];
+    const Vec3& x1 = corners[(rotation + 1) % 3];
+    const Vec3& x2 = corners[(rotation + 2) % 3];
+    INFO(describe(p, x0, x1, x2));
+    const TriangleClosest r = closestPointOnTriangle(p, x0, x1, x2);
+    CHECK(r.squared_distance == 1.0);
+    CHECK(r.point == Vec3(2, 0, 0));
+    CHECK(static_cast<int>(r.feature) >= 3);
+    CHECK(static_cast<int>(r.feature) < 6);
+    CHECK_CONSISTENT(r, p, x0, x1, x2, "A == B");
+  }
+}
+
+TEST_CASE("closest point: degenerate triangles", "[triangle_distance]") {
+  struct Shape {
+    const char* name;
+    Vec3 a, b, c;
+  };
+  const std::vector<Shape> shapes = {
+      {"collinear, C beyond B", {0, 0, 0}, {2, 0, 0}, {5, 0, 0}},
+      {"collinear, C between A and B", {0, 0, 0}, {5, 0, 0}, {2, 0, 0}},
+      {"collinear, slanted", {1, 2, 3}, {3, 5, 7}, {-1, -1, -1}},
+      {"A == B", {1, 1, 1}, {1, 1, 1}, {3, 1, 2}},
+      {"B == C", {1, 1, 1}, {3, 1, 2}, {3, 1, 2}},
+      {"C == A", {3, 1, 2}, {1, 1, 1}, {3, 1, 2}},
+      {"all coincident", {1, -2, 3}, {1, -2, 3}, {1, -2, 3}},
+      {"all zero", {0, 0, 0}, {0, 0, 0}, {0, 0, 0}},
+  };
+  std::mt19937_64 rng(7);
+  for (const Shape& s : shapes) {
+    SECTION(s.name) {
+      std::array<Vec3, 3> corners = {s.a, s.b, s.c};
+      std::array<int, 3> order = {0, 1, 2};
+      do {
+        const Vec3& x0 = corners[order[0]];
+        const Vec3& x1 = corners[order[1]];
+        const Vec3& x2 = corners[order[2]];
+        for (int i = 0; i < 2000; ++i) {
+          const Vec3 p = i < 3 ? corners[i] : Vec3(randomVector(rng, 6) + Vec3(1, 1, 1));
+          const TriangleClosest r = closestPointOnTriangle(p, x0, x1, x2);
+          CHECK_CONSISTENT(r, p, x0, x1, x2, s.name);
+          const double reference = referenceSquared(p, x0, x1, x2);
+          CHECK_WITH(agrees(r.squared_distance, reference, maxAbs(p, x0, x1, x2)),
+                     s.name << " " << describe(p, x0, x1, x2) << " got " << r.squared_distance
+                            << " reference " << reference);
+        }
+      } while (std::next_permutation(order.begin(), order.end()));
+    }
+  }
+}
+
+TEST_CASE("closest point: near-degenerate slivers", "[triangle_distance]") {
+  // Needles (one tiny angle, largest angle 90 degrees) are plain triangles for the algorithm;
+  // caps (largest angle near 180 degrees) switch to segments when sin^2 of that angle drops
+  // below 1e-10. Caps close to that threshold are the documented worst case: about 1e-12 of the
+  // squared longest edge, so they get that absolute allowance.
+  std::mt19937_64 rng(5);
+  std::uniform_real_distribution<double> u(0, 1);
+  for (int k = 0; k <= 32; ++k) {
+    const double thinness = std::pow(10.0, -0.5 * k);  // 1 .. 1e-16
+    for (int shape = 0; shape < 2; ++shape) {
+      const bool cap = shape == 1;
+      for (int i = 0; i < 400; ++i) {
+        const Eigen::Matrix3d rotation = randomRotation(rng);
+        const Vec3 shift = randomVector(rng, 3);
+        const double length = std::pow(10.0, -3 + 6 * u(rng));
+        const double x = u(rng);
+        const Vec3 c_local = cap ? Vec3(x, thinness * std::min(x, 1 - x), 0) : Vec3(1, thinness, 0);
+        const Vec3 a = shift;
+        const Vec3 b = rotation * Vec3(length, 0, 0) + shift;
+        const Vec3 c = rotation * (length * c_local) + shift;
+        const Vec3 p = randomQuery(rng, a, b, c, a, length);
+        const TriangleClosest r = closestPointOnTriangle(p, a, b, c);
+        CHECK_CONSISTENT(r, p, a, b, c, (cap ? "cap" : "needle") << " thinness " << thinness);
+        const double reference = referenceSquared(p, a, b, c);
+        const double m = maxAbs(p, a, b, c);
+        const double allowance = cap ? 2e-12 * length * length : 0.0;
+        const bool ok = agrees(r.squared_distance, reference, m) ||
+                        std::abs(r.squared_distance - reference) <= allowance;
+        CHECK_WITH(ok,
+                   (cap ? "cap" : "needle") << " thinness " << thinness << " "
+                                            << describe(p, a, b, c) << " got "
+                                            << r.squared_distance << " reference " << reference);
+      }
+    }
+  }
+}
+
+TEST_CASE("closest point: random triangles against the reference", "[triangle_distance]") {
+  // 100k cases over scales 1e-6 .. 1e6 (and a few at 1e-60 and 1e60).
+  std::mt19937_64 rng(2024);
+  const double scales[] = {1e-6, 1e-3, 1.0, 1e3, 1e6, 1e-60, 1e60};
+  const int counts[] = {20000, 20000, 20000, 20000, 20000, 2000, 2000};
+  for (int s = 0; s < 7; ++s) {
+    const double scale = scales[s];
+    for (int i = 0; i < counts[s]; ++i) {
+      const Vec3 center = randomVector(rng, 4 * scale);
+      const Vec3 a = center + randomVector(rng, scale);
+      const Vec3 b = center + randomVector(rng, scale);
+      const Vec3 c = center + randomVector(rng, scale);
+      const Vec3 p = randomQuery(rng, a, b, c, center, scale);
+      const TriangleClosest r = closestPointOnTriangle(p, a, b, c);
+      const double reference = referenceSquared(p, a, b, c);
+      CHECK_WITH(agrees(r.squared_distance, reference, maxAbs(p, a, b, c)),
+                 "scale " << scale << " case " << i << " " << describe(p, a, b, c) << " got "
+                          << r.squared_distance << " reference " << reference);
+      CHECK_CONSISTENT(r, p, a, b, c, "scale " << scale << " case " << i);
+    }
+  }
+}
+
+TEST_CASE("closest point: extreme magnitudes stay finite and on the triangle",
+          "[triangle_distance]") {
+  std::mt19937_64 rng(99);
+  for (int e = -150; e <= 150; e += 10) {
+    const double scale = std::pow(10.0, e);
+    for (int i = 0; i < 200; ++i) {
+      const Vec3 center = randomVector(rng, 4 * scale);
+      const Vec3 a = center + randomVector(rng, scale);
+      const Vec3 b = center + randomVector(rng, scale);
+      const Vec3 c = i % 4 == 0 ? a : center + randomVector(rng, scale);
+      const Vec3 p = randomQuery(rng, a, b, c, center, scale);
+      const TriangleClosest r = closestPointOnTriangle(p, a, b, c);
+      const Vec3 lower = a.cwiseMin(b).cwiseMin(c), upper = a.cwiseMax(b).cwiseMax(c);
+      const double slack = 4 * kEps * maxAbs(p, a, b, c);
+      const bool ok = std::isfinite(r.squared_distance) && r.point.allFinite() &&
+                      r.barycentric.allFinite() && r.barycentric.minCoeff() >= 0.0 &&
+                      std::abs(r.barycentric.sum() - 1.0) <= 4 * kEps &&
+                      (r.point.array() >= lower.array() - slack).all() &&
+                      (r.point.array() <= upper.array() + slack).all();
+      CHECK_WITH(ok, "scale 1e" << e << " " << describe(p, a, b, c) << " got point ("
+                                << r.point.transpose() << ") bary ("
+                                << r.barycentric.transpose() << ")");
+    }
+  }
+}
+
+namespace {
+
+void setLane(TriangleBlock8& block, int lane, const Vec3& a, const Vec3& b, const Vec3& c) {
+  const Vec3* corners[3] = {&a, &b, &c};
+  for (int k = 0; k < 3; ++k)
+    for (int axis = 0; axis < 3; ++axis) block.v[k][axis][lane] = (*corners[k])[axis];
+}
+
+Vec3 laneCorner(const TriangleBlock8& block, int lane, int k) {
+  return Vec3(block.v[k][0][lane], block.v[k][1][lane], block.v[k][2][lane]);
+}
+
+}  // namespace
+
+TEST_CASE("block of eight equals the scalar function", "[triangle_distance]") {
+  std::mt19937_64 rng(31);
+  std::uniform_real_distribution<double> u(0, 1);
+  std::uniform_int_distribution<int> kind(0, 9);
+  const double scales[] = {1e-6, 1e-2, 1.0, 1e2, 1e6};
+  int lanes_checked = 0;
+  for (double scale : scales) {
+    for (int round = 0; round < 4000; ++round) {
+      TriangleBlock8 block;
+      const Vec3 center = randomVector(rng, 4 * scale);
+      const int used = 1 + round % 8;  // unused lanes copy lane 0
+      for (int lane = 0; lane < 8; ++lane) {
+        Vec3 a = center + randomVector(rng, scale);
+        Vec3 b = center + randomVector(rng, scale);
+        Vec3 c = center + randomVector(rng, scale);
+        switch (kind(rng)) {
+          case 0: c = a + 0.37 * (b - a); break;                   // collinear (rounded)
+          case 1: c = a + 2.5 * (b - a); break;                    // collinear, outside
+          case 2: b = a; break;                                    // two coincident corners
+          case 3: b = a; c = a; break;                             // a point
+          case 4: c = b; break;                                    // two coincident corners
+          case 5: {                                                // cap
+            const Vec3 n = (b - a).cross(randomVector(rng, 1.0)).normalized();
+            c = a + u(rng) * (b - a) + n * scale * std::pow(10.0, -12 * u(rng));
+            break;
+          }
+          case 6: {                                                // needle
+            const Vec3 n = (b - a).cross(randomVector(rng, 1.0)).normalized();
+            c = b + n * scale * std::pow(10.0, -12 * u(rng));
+            break;
+          }
+          default: break;                                          // plain triangle
+        }
+        setLane(block, lane, a, b, c);
+      }
+      for (int lane = used; lane < 8; ++lane)
+        setLane(block, lane, laneCorner(block, 0, 0), laneCorner(block, 0, 1),
+                laneCorner(block, 0, 2));
+      const int target = std::uniform_int_distribution<int>(0, 7)(rng);
+      const Vec3 p = randomQuery(rng, laneCorner(block, target, 0), laneCorner(block, target, 1),
+                                 laneCorner(block, target, 2), center, scale);
+      double out[8];
+      squaredDistancesToBlock(p, block, out);
+      for (int lane = 0; lane < 8; ++lane) {
+        const Vec3 a = laneCorner(block, lane, 0), b = laneCorner(block, lane, 1),
+                   c = laneCorner(block, lane, 2);
+        const double scalar = squaredDistanceToTriangle(p, a, b, c);
+        // The header promises relative 1e-14; by construction the values are identical.
+        CHECK_WITH(std::abs(out[lane] - scalar) <= 1e-14 * scalar,
+                   "scale " << scale << " round " << round << " lane " << lane << " "
+                            << describe(p, a, b, c) << " block " << out[lane] << " scalar "
+                            << scalar);
+        ++lanes_checked;
+      }
+    }
+  }
+  CHECK(lanes_checked == 5 * 4000 * 8);
+}
+
+TEST_CASE("block of eight: hand-made lanes", "[triangle_distance]") {
+  // Every feature of the hand-made triangle, plus degenerate lanes, all in one block.
+  TriangleBlock8 block;
+  setLane(block, 0, {0, 0, 0}, {4, 0, 0}, {0, 4, 0});
+  setLane(block, 1, {4, 0, 0}, {0, 4, 0}, {0, 0, 0});
+  setLane(block, 2, {0, 4, 0}, {0, 0, 0}, {4, 0, 0});
+  setLane(block, 3, {0, 0, 0}, {0, 0, 0}, {4, 0, 0});  // A == B
+  setLane(block, 4, {0, 0, 0}, {2, 0, 0}, {5, 0, 0});  // collinear
+  setLane(block, 5, {1, 1, 1}, {1, 1, 1}, {1, 1, 1});  // a point
+  setLane(block, 6, {0, 0, 0}, {4, 0, 0}, {2, 1e-9, 0});  // cap
+  setLane(block, 7, {0, 0, 0}, {4, 0, 0}, {4, 1e-9, 0});  // needle
+  for (const Expected& e : handMadeCases()) {
+    double out[8];
+    squaredDistancesToBlock(e.p, block, out);
+    for (int lane = 0; lane < 8; ++lane) {
+      const Vec3 a = laneCorner(block, lane, 0), b = laneCorner(block, lane, 1),
+                 c = laneCorner(block, lane, 2);
+      INFO(e.name << " lane " << lane << " " << describe(e.p, a, b, c));
+      const double scalar = squaredDistanceToTriangle(e.p, a, b, c);
+      CHECK(std::abs(out[lane] - scalar) <= 1e-14 * scalar);
+      if (lane < 3) CHECK(out[lane] == e.squared_distance);
+    }
+  }
+}
