@@ -25,7 +25,7 @@ float boxMargin(double extent) {
   return static_cast<float>(std::max(1.0, extent) * std::ldexp(1.0, -19));
 }
 
-void refitBounds(const Hierarchy& h, const Vec3* positions, std::vector<Node8>& nodes, bool radii) {
+void refitBounds(const Hierarchy& h, const Vec3* positions, std::vector<Node8>& nodes, bool radii, bool boxes) {
   const Mesh& mesh = h.mesh();
   const auto& lanes = h.leafTriangles();
   const double scale = h.boxScale();
@@ -33,10 +33,10 @@ void refitBounds(const Hierarchy& h, const Vec3* positions, std::vector<Node8>& 
   // Leaf slots from their faces, then inner slots from their child's slots, children first
   // (a child node always has a larger index than its parent).
   double extent = 0;
-  for (size_t v = 0; v < mesh.positions.size(); ++v)
+  for (size_t v = 0; boxes && v < mesh.positions.size(); ++v)
     extent = std::max(extent, ((positions[v] - h.center()) * scale).cwiseAbs().maxCoeff());
   const float margin = boxMargin(extent);
-  for (size_t node = nodes.size(); node-- > 0;) {
+  for (size_t node = boxes ? nodes.size() : 0; node-- > 0;) {
     Node8& n = nodes[node];
     for (int k = 0; k < 8; ++k) {
       const ChildRef c = n.child[k];
@@ -44,14 +44,17 @@ void refitBounds(const Hierarchy& h, const Vec3* positions, std::vector<Node8>& 
       float lo[3] = {inf, inf, inf}, hi[3] = {-inf, -inf, -inf};
       if (isLeafRef(c)) {
         const int32_t leaf = leafIndex(c);
+        Vec3 low = Vec3::Constant(std::numeric_limits<double>::infinity()), high = -low;
         for (uint32_t lane = 0; lane < h.leafLanes(leaf); ++lane) {
           for (VertexIndex v : mesh.triangles[lanes[8 * leaf + lane]]) {
-            const Vec3 x = (positions[v] - h.center()) * scale;
-            for (int axis = 0; axis < 3; ++axis) {
-              lo[axis] = std::min(lo[axis], std::nextafter(static_cast<float>(x[axis]), -inf) - margin);
-              hi[axis] = std::max(hi[axis], std::nextafter(static_cast<float>(x[axis]), inf) + margin);
-            }
+            low = low.cwiseMin(positions[v]);
+            high = high.cwiseMax(positions[v]);
           }
+        }
+        const Vec3 scaled_low = (low - h.center()) * scale, scaled_high = (high - h.center()) * scale;
+        for (int axis = 0; axis < 3; ++axis) {
+          lo[axis] = std::nextafter(static_cast<float>(scaled_low[axis]), -inf) - margin;
+          hi[axis] = std::nextafter(static_cast<float>(scaled_high[axis]), inf) + margin;
         }
       } else {
         const Node8& child = nodes[c];

@@ -130,11 +130,13 @@ class Hierarchy {
 
 // Recomputes slot bounds over the hierarchy's topology for other vertex positions (a moved or
 // deformed copy of the mesh): `nodes` must be a copy of h.nodes(); every slot's box (scaled
-// with h.center() and h.boxScale(), rounded outward with a margin) and, if `radii`, its eps
-// (max distance of its subtree's vertices to its triangle, at these positions) are rewritten.
+// with h.center() and h.boxScale(), rounded outward with a margin) unless `boxes` is false, and
+// if `radii` its eps (max distance of its subtree's vertices to its triangle, at these
+// positions) are rewritten.
 // positions: [vertex], as many as the mesh has. Boxes: one bottom-up pass; radii: exact, the
 // cost of the build's radius phase.
-void refitBounds(const Hierarchy& h, const Vec3* positions, std::vector<Node8>& nodes, bool radii);
+void refitBounds(const Hierarchy& h, const Vec3* positions, std::vector<Node8>& nodes, bool radii,
+                 bool boxes = true);
 
 // The float margin that covers query-point rounding for boxes whose scaled coordinates reach
 // `extent` in magnitude (see Hierarchy::boxScale()).

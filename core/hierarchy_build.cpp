@@ -23,6 +23,7 @@
 #include <chrono>
 #include <cmath>
 #include <limits>
+#include <cstring>
 #include <numeric>
 
 namespace meshsweeper {
@@ -35,6 +36,7 @@ double secondsSince(Clock::time_point start) {
 
 constexpr uint32_t kNone = kInvalidIndex;
 constexpr uint32_t kLeafFaces = 8;
+constexpr uint32_t kSpatialFaces = 512;  // subtrees this small are split spatially into leaf blocks
 
 struct Box {
   Vec3 lower = Vec3::Constant(std::numeric_limits<double>::infinity());
@@ -253,6 +255,7 @@ void Contractor::run(CoverTree& tree, std::vector<VertexIndex>& contracted_into,
   }
 
   std::vector<Candidate> candidates;
+  std::vector<uint64_t> order;
   std::vector<uint8_t> locked(n, 0);  // [vertex] may not be a source (or is gone) this round
   const uint32_t kMaxRounds = 10000;
   while (live_triangles_ > base_triangles_ && stats.rounds < kMaxRounds) {
@@ -284,7 +287,7 @@ void Contractor::run(CoverTree& tree, std::vector<VertexIndex>& contracted_into,
       for (VertexIndex u : neighbours_) ranked_.emplace_back((mesh_.positions[u] - pv).squaredNorm(), u);
       std::sort(ranked_.begin(), ranked_.end());
       VertexIndex target = kNone;
-      for (size_t j = 0; j < ranked_.size() && j < 4; ++j) {
+      for (size_t j = 0; j < ranked_.size() && j < 2; ++j) {
         if (findDeletions(v, ranked_[j].second, deletions_)) {
           target = ranked_[j].second;
           break;
@@ -303,12 +306,19 @@ void Contractor::run(CoverTree& tree, std::vector<VertexIndex>& contracted_into,
       if (target != kNone)
         candidates.push_back({radius_[v] + (mesh_.positions[target] - pv).norm(), v, target});
     }
-    std::sort(candidates.begin(), candidates.end(), [](const Candidate& a, const Candidate& b) {
-      return a.cost != b.cost ? a.cost < b.cost : a.v < b.v;
-    });
+    // Cheapest first: costs are >= 0, so their float bits order like the costs (ties by index).
+    order.resize(candidates.size());
+    for (size_t i = 0; i < candidates.size(); ++i) {
+      const float cost = static_cast<float>(candidates[i].cost);
+      uint32_t bits;
+      std::memcpy(&bits, &cost, sizeof(bits));
+      order[i] = static_cast<uint64_t>(bits) << 32 | i;
+    }
+    std::sort(order.begin(), order.end());
 
     uint32_t applied = 0;
-    for (const Candidate& cand : candidates) {
+    for (uint64_t key : order) {
+      const Candidate& cand = candidates[static_cast<uint32_t>(key)];
       if (live_triangles_ <= base_triangles_) break;
       if (locked[cand.v] || contracted_into[cand.u] != kNone || contracted_into[cand.v] != kNone)
         continue;
@@ -347,6 +357,10 @@ class HierarchyBuilder {
   int32_t buildTop(std::vector<int32_t>::iterator first, std::vector<int32_t>::iterator last);
   void collapse();
   void collectFaces(int32_t raw, std::vector<TriangleIndex>& faces) const;
+  void spatialNode(std::vector<TriangleIndex>& faces, int32_t node);
+  template <class Emit>
+  void splitFaces(std::vector<TriangleIndex>::iterator first, std::vector<TriangleIndex>::iterator last,
+                  size_t group, Emit&& emit) const;
   uint32_t addLeafBlock(const std::vector<TriangleIndex>& faces);
   void setSlot(Node8& node, int k, ChildRef child, const Triangle& corners, const Box& box) const;
   void computeRadii();
@@ -358,6 +372,8 @@ class HierarchyBuilder {
   std::vector<uint32_t> raw_faces_;   // [raw node] original faces in the subtree
   std::vector<uint32_t> child_begin_; // [raw node + 1] CSR into child_list_
   std::vector<int32_t> child_list_;
+  Node8 empty_;                       // a node with eight empty slots
+  std::vector<Vec3> centroid_;        // [face] sum of its corners (3x the centroid)
 };
 
 void HierarchyBuilder::buildChildLists() {
@@ -443,6 +459,66 @@ void HierarchyBuilder::collectFaces(int32_t raw, std::vector<TriangleIndex>& fac
   }
 }
 
+// Fills `node` with the faces of a small subtree re-grouped by median splits: groups of at
+// most 8 faces become leaf blocks, larger groups child nodes (depth-first, like collapse()).
+// Any grouping of whole faces is a valid cover; contraction groups are spatially looser.
+void HierarchyBuilder::spatialNode(std::vector<TriangleIndex>& faces, int32_t node) {
+  size_t group = kLeafFaces;
+  while (group * 8 < faces.size()) group *= 8;
+  std::vector<std::vector<TriangleIndex>> groups;
+  splitFaces(faces.begin(), faces.end(), group, [&](auto first, auto last) { groups.emplace_back(first, last); });
+  int k = 0;
+  std::vector<std::pair<int32_t, size_t>> children;  // (node, group)
+  for (size_t i = 0; i < groups.size(); ++i) {
+    Box box;
+    for (TriangleIndex f : groups[i])
+      for (VertexIndex v : mesh_.triangles[f]) box.add(mesh_.positions[v]);
+    const Triangle& corners = mesh_.triangles[groups[i].front()];
+    if (groups[i].size() <= kLeafFaces) {
+      const uint32_t leaf = addLeafBlock(groups[i]);
+      setSlot(h_.nodes_[node], k++, leafRef(static_cast<int32_t>(leaf)), corners, box);
+      continue;
+    }
+    const int32_t child = static_cast<int32_t>(h_.nodes_.size());
+    h_.nodes_.push_back(empty_);
+    h_.parent_.push_back(node);
+    h_.leaf_begin_.push_back(0);
+    setSlot(h_.nodes_[node], k++, child, corners, box);
+    children.emplace_back(child, i);
+  }
+  for (auto& [child, i] : children) {
+    h_.leaf_begin_[child] = static_cast<uint32_t>(h_.leaf_blocks_.size());
+    spatialNode(groups[i], child);
+  }
+}
+
+// Splits faces at the median of their centroids along the widest axis into groups of at most
+// `group` faces, the left part a multiple of `group` so that groups are full; emits them in order.
+template <class Emit>
+void HierarchyBuilder::splitFaces(std::vector<TriangleIndex>::iterator first,
+                                  std::vector<TriangleIndex>::iterator last, size_t group, Emit&& emit) const {
+  const size_t count = static_cast<size_t>(last - first);
+  if (count <= group) {
+    emit(first, last);
+    return;
+  }
+  auto centroid = [&](TriangleIndex f) -> const Vec3& { return centroid_[f]; };
+  Box bounds;
+  for (auto it = first; it != last; ++it) bounds.add(centroid(*it));
+  int axis = 0;
+  const Vec3 extent = bounds.upper - bounds.lower;
+  if (extent.y() > extent[axis]) axis = 1;
+  if (extent.z() > extent[axis]) axis = 2;
+  const size_t blocks = (count + group - 1) / group;
+  auto middle = first + static_cast<std::ptrdiff_t>(group * ((blocks + 1) / 2));
+  std::nth_element(first, middle, last, [&](TriangleIndex a, TriangleIndex b) {
+    const double ca = centroid(a)[axis], cb = centroid(b)[axis];
+    return ca != cb ? ca < cb : a < b;
+  });
+  splitFaces(first, middle, group, emit);
+  splitFaces(middle, last, group, emit);
+}
+
 uint32_t HierarchyBuilder::addLeafBlock(const std::vector<TriangleIndex>& faces) {
   const uint32_t leaf = static_cast<uint32_t>(h_.leaf_blocks_.size());
   TriangleBlock8& block = h_.leaf_blocks_.emplace_back();
@@ -477,11 +553,15 @@ void HierarchyBuilder::setSlot(Node8& node, int k, ChildRef child, const Triangl
 }
 
 void HierarchyBuilder::collapse() {
+  centroid_.resize(mesh_.triangles.size());
+  for (size_t f = 0; f < mesh_.triangles.size(); ++f) {
+    const Triangle& t = mesh_.triangles[f];
+    centroid_[f] = mesh_.positions[t[0]] + mesh_.positions[t[1]] + mesh_.positions[t[2]];
+  }
   buildChildLists();
-  auto childCount = [&](int32_t x) { return child_begin_[x + 1] - child_begin_[x]; };
 
   const int32_t top = tree_.roots.front();
-  Node8 empty;
+  Node8& empty = empty_;
   for (int axis = 0; axis < 3; ++axis) {
     for (int k = 0; k < 8; ++k) {
       empty.lower[axis][k] = std::numeric_limits<float>::infinity();
@@ -509,40 +589,57 @@ void HierarchyBuilder::collapse() {
     std::vector<int32_t> members;
   };
   std::vector<std::pair<int32_t, int32_t>> stack{{top, 0}};  // (raw node, 8-wide node)
-  std::vector<int32_t> slots, inner;
+  std::vector<int32_t> slots, inner, trial, blocked;
   std::vector<Bin> bins;
   while (!stack.empty()) {
     const auto [x, node] = stack.back();
     stack.pop_back();
     h_.leaf_begin_[node] = static_cast<uint32_t>(h_.leaf_blocks_.size());
+    if (raw_faces_[x] <= kSpatialFaces) {
+      faces.clear();
+      collectFaces(x, faces);
+      spatialNode(faces, node);
+      continue;
+    }
     slots.assign(child_list_.begin() + child_begin_[x], child_list_.begin() + child_begin_[x + 1]);
-    // Expand the largest inner child while its children fit in the eight slots.
-    while (slots.size() < 8) {
-      int best = -1;
+    // Small children (at most 8 faces) become leaf blocks, packed first-fit by decreasing size;
+    // the rest are inner slots. Expand the largest inner slot into its children as long as the
+    // packed slots still fit in eight (wide nodes, shallow trees).
+    auto pack = [&](std::vector<int32_t>& list) {
+      inner.clear();
+      bins.clear();
+      std::sort(list.begin(), list.end(), [&](int32_t a, int32_t b) {
+        return raw_faces_[a] != raw_faces_[b] ? raw_faces_[a] > raw_faces_[b] : a < b;
+      });
+      for (int32_t c : list) {
+        if (raw_faces_[c] > kLeafFaces) { inner.push_back(c); continue; }
+        Bin* fit = nullptr;
+        for (Bin& bin : bins) if (bin.faces + raw_faces_[c] <= kLeafFaces) { fit = &bin; break; }
+        if (!fit) fit = &bins.emplace_back();
+        fit->faces += raw_faces_[c];
+        fit->members.push_back(c);
+      }
+      return inner.size() + bins.size();
+    };
+    pack(slots);
+    blocked.clear();
+    while (true) {
+      int32_t best = -1;
       double best_area = -1;
-      for (size_t i = 0; i < slots.size(); ++i) {
-        const int32_t c = slots[i];
-        if (raw_faces_[c] <= kLeafFaces || slots.size() - 1 + childCount(c) > 8) continue;
-        if (raw_box_[c].area() > best_area) { best_area = raw_box_[c].area(); best = static_cast<int>(i); }
+      for (int32_t c : inner) {
+        if (std::find(blocked.begin(), blocked.end(), c) != blocked.end()) continue;
+        if (raw_box_[c].area() > best_area) { best_area = raw_box_[c].area(); best = c; }
       }
       if (best < 0) break;
-      const int32_t c = slots[best];
-      slots.erase(slots.begin() + best);
-      slots.insert(slots.end(), child_list_.begin() + child_begin_[c],
-                   child_list_.begin() + child_begin_[c + 1]);
-    }
-    // Small children become leaf blocks, packed first-fit by decreasing size.
-    inner.clear();
-    bins.clear();
-    std::sort(slots.begin(), slots.end(),
-              [&](int32_t a, int32_t b) { return raw_faces_[a] > raw_faces_[b]; });
-    for (int32_t c : slots) {
-      if (raw_faces_[c] > kLeafFaces) { inner.push_back(c); continue; }
-      Bin* fit = nullptr;
-      for (Bin& bin : bins) if (bin.faces + raw_faces_[c] <= kLeafFaces) { fit = &bin; break; }
-      if (!fit) fit = &bins.emplace_back();
-      fit->faces += raw_faces_[c];
-      fit->members.push_back(c);
+      trial = slots;
+      trial.erase(std::find(trial.begin(), trial.end(), best));
+      trial.insert(trial.end(), child_list_.begin() + child_begin_[best], child_list_.begin() + child_begin_[best + 1]);
+      if (pack(trial) <= 8) {
+        slots.swap(trial);
+      } else {
+        blocked.push_back(best);
+      }
+      pack(slots);
     }
     int k = 0;
     for (const Bin& bin : bins) {
@@ -581,7 +678,7 @@ void HierarchyBuilder::computeRadii() {
     }
     h_.leaf_end_[node] = end;
   }
-  refitBounds(h_, mesh_.positions.data(), h_.nodes_, true);
+  refitBounds(h_, mesh_.positions.data(), h_.nodes_, true, false);  // boxes are set already
 }
 
 void HierarchyBuilder::run(const BuildOptions& options) {

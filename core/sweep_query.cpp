@@ -74,6 +74,34 @@ inline void boxDistances(const Node8& n, const float q[3], float out[8]) {
 #endif
 }
 
+// Order keys for the children: box distance plus a weighted squared distance to the box centre.
+inline void centerDistances(const Node8& n, const float q[3], const float box[8], float out[8]) {
+  constexpr float kCenterWeight = 0.25f;
+  for (int k = 0; k < 8; ++k) {
+    float acc = 0;
+    for (int axis = 0; axis < 3; ++axis) {
+      const float c = 0.5f * (n.lower[axis][k] + n.upper[axis][k]) - q[axis];
+      acc += c * c;
+    }
+    out[k] = box[k] + kCenterWeight * acc;
+  }
+}
+
+// Starts loading a node (352 bytes) or leaf block (576 bytes) into cache.
+inline void prefetchChild(const TreeGeometry& g, ChildRef ref) {
+  const char* base;
+  int lines;
+  if (isLeafRef(ref)) {
+    if (!g.leaf_blocks) return;
+    base = reinterpret_cast<const char*>(&g.leaf_blocks[leafIndex(ref)]);
+    lines = sizeof(TriangleBlock8) / 64;
+  } else {
+    base = reinterpret_cast<const char*>(&g.nodes[ref]);
+    lines = (sizeof(Node8) + 63) / 64;
+  }
+  for (int i = 0; i < lines; ++i) __builtin_prefetch(base + 64 * i);
+}
+
 struct ScaledPoint {
   float q[3];
   bool far;  // too far for float boxes: every box bound is taken as 0
@@ -252,16 +280,24 @@ double QueryStream::depthFirst(const Vec3& p, double start2, double reach, Trian
     const Node8& node = g.nodes[entry.ref];
     ++counters_.nodes_visited;
     if (sp.far) std::fill(dist, dist + 8, 0.0f); else boxDistances(node, sp.q, dist);
-    // Children below the threshold, pushed farthest first so the closest is popped next.
+    // Children below the threshold, pushed farthest first so the closest is popped next. The
+    // order key adds the distance to the box centre, which ranks boxes that hold the point.
+    float order[8];
+    centerDistances(node, sp.q, dist, order);
     StackEntry open[8];
+    float open_key[8];
     int count = 0;
     for (int k = 0; k < 8; ++k) {
       if (node.child[k] == kEmptyChild || dist[k] > threshold) continue;
       int i = count++;
-      while (i > 0 && open[i - 1].bound < dist[k]) { open[i] = open[i - 1]; --i; }
+      while (i > 0 && open_key[i - 1] < order[k]) { open[i] = open[i - 1]; open_key[i] = open_key[i - 1]; --i; }
       open[i] = {node.child[k], dist[k]};
+      open_key[i] = order[k];
     }
     stack_.insert(stack_.end(), open, open + count);
+    // The closest child is popped next: start loading it.
+    if (count > 0) prefetchChild(g, open[count - 1].ref);
+    if (count > 1) prefetchChild(g, open[count - 2].ref);
   }
   return best2;
 }
@@ -361,6 +397,74 @@ ClosestPoint QueryStream::closestCoherent(const Vec3& p) {
     has_last_ = true;
     last_point_ = p;
     last_face_ = face;
+  }
+  out.counters = counters_;
+  return out;
+}
+
+ClosestPoint QueryStream::closestCoherent(const Vec3& p, CoherentState& state, bool* certified_out) {
+  const TreeGeometry& g = geometry();
+  const Mesh& mesh = hierarchy_->mesh();
+  counters_ = {};
+  // The previous face warm-starts the search even on changed geometry (any face's distance
+  // bounds the answer); the cached set is used only on the geometry it was gathered on.
+  const bool warm = state.last_face < mesh.triangles.size();
+  if (warm) {
+    const float step = static_cast<float>((p - state.last_point).norm());
+    state.mean_step = state.mean_step > 0 ? 0.9f * state.mean_step + 0.1f * step : step;
+  }
+  TriangleIndex face = kInvalidIndex;
+  bool certified = false;
+  if (warm && state.count > 0 && state.version == g.version) {
+    const double moved = (p - state.anchor).norm();
+    if (moved < state.reach) {
+      double best2 = kInf;
+      for (uint32_t i = 0; i < state.count; ++i) {
+        const Triangle& t = mesh.triangles[state.faces[i]];
+        const double d2 = squaredDistanceToTriangle(p, g.positions[t[0]], g.positions[t[1]], g.positions[t[2]]);
+        if (d2 < best2 || (d2 == best2 && state.faces[i] < face)) { best2 = d2; face = state.faces[i]; }
+      }
+      counters_.triangles_tested = state.count;
+      certified = std::sqrt(best2) + moved < state.reach * (1 - 1e-9);
+    }
+  }
+  if (!certified) {
+    const double reach = 2.0 * state.reach_steps * state.mean_step;
+    double start2 = kInf;
+    face = kInvalidIndex;
+    if (warm) {
+      const Triangle& t = mesh.triangles[state.last_face];
+      start2 = squaredDistanceToTriangle(p, g.positions[t[0]], g.positions[t[1]], g.positions[t[2]]);
+      face = state.last_face;
+    }
+    gathered_.clear();
+    const double best2 = depthFirst(p, start2, reach, face);
+    const double limit = std::sqrt(best2) + reach;
+    size_t kept = 0;
+    for (const auto& entry : gathered_)
+      if (std::sqrt(entry.first) <= limit) gathered_[kept++] = entry;
+    gathered_.resize(kept);
+    std::sort(gathered_.begin(), gathered_.end());
+    double set_reach = std::nextafter(limit, kInf);
+    if (gathered_.size() > kCoherentSetSize) {
+      set_reach = std::sqrt(gathered_[kCoherentSetSize].first);
+      gathered_.resize(kCoherentSetSize);
+    }
+    state.count = static_cast<uint32_t>(gathered_.size());
+    for (uint32_t i = 0; i < state.count; ++i) state.faces[i] = gathered_[i].second;
+    state.anchor = p;
+    state.reach = state.count > 0 ? set_reach : 0;
+    state.version = g.version;
+  }
+  if (certified_out) *certified_out = certified;
+  ClosestPoint out;
+  if (face == kInvalidIndex) {
+    out.distance = out.lower = out.upper = std::numeric_limits<double>::quiet_NaN();
+    state = CoherentState{};
+  } else {
+    fillFromHit(out, hitOn(face, p));
+    state.last_face = face;
+    state.last_point = p;
   }
   out.counters = counters_;
   return out;

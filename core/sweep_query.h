@@ -43,9 +43,9 @@ struct TriangleHit {
 struct CoherenceOptions {
   // Set certificate: candidates are gathered within d + 2R of the anchor point, with
   // R = reach_steps * (running mean step length); a larger R means fewer rebuilds, larger sets.
-  double reach_steps = 6;
+  double reach_steps = 2;
   // At most this many candidate faces (the nearest are kept; the certificate shrinks to fit).
-  uint32_t max_candidates = 96;
+  uint32_t max_candidates = 48;
   // Dynamic front: back to the roots when the front holds more entries than this, or when the
   // point jumps farther than jump_factor times its last distance to the mesh.
   uint32_t front_budget = 4096;
@@ -60,6 +60,23 @@ struct CoherenceCounters {
   uint64_t candidates = 0;      // candidate faces gathered over all rebuilds
   uint64_t front_resets = 0;    // dynamic front restarted from the roots
   uint64_t recomputed = 0;      // stale front entries recomputed
+};
+
+// Compact coherent state of one moving point against one mesh (a cloth vertex against a body):
+// zero-initialised (default-constructed) means a cold start. Used with
+// QueryStream::closestCoherent(p, state), where the stream lends its scratch memory; the state
+// keeps only the certificate: an anchor, a reach and up to kCoherentSetSize candidate faces.
+inline constexpr uint32_t kCoherentSetSize = 32;
+struct CoherentState {
+  Vec3 anchor = Vec3::Zero();        // where the candidate set was gathered
+  double reach = 0;                  // every face outside the set is at least this far from anchor
+  uint64_t version = 0;              // geometry version the set was gathered on
+  TriangleIndex last_face = kInvalidIndex;
+  uint32_t count = 0;                // candidate faces (0: cold)
+  float mean_step = 0;               // running mean of the point's step length
+  float reach_steps = 6;             // R = reach_steps * mean_step (see CoherenceOptions)
+  Vec3 last_point = Vec3::Zero();
+  TriangleIndex faces[kCoherentSetSize];
 };
 
 class QueryStream {
@@ -92,6 +109,13 @@ class QueryStream {
   // a cached candidate set while its certificate holds, else by a warm-started depth-first
   // query that rebuilds the set. Same answers as closest().
   ClosestPoint closestCoherent(const Vec3& p);
+
+  // The same for a caller-held compact state (one per moving point and mesh); this stream only
+  // lends scratch memory, so one stream per thread serves any number of states. `certified`
+  // (optional) tells whether the cached set answered. Same answers as closest(). A state
+  // belongs to one mesh; its set is dropped when the geometry's version changes (deforming
+  // bodies), its previous face still warm-starts the search.
+  ClosestPoint closestCoherent(const Vec3& p, CoherentState& state, bool* certified = nullptr);
 
   // The paper's dynamic process for a moving point: the priority front persists between calls;
   // moving by delta lowers every bound by delta (a drift offset, O(1)), stale entries are
