@@ -1,6 +1,10 @@
 # Install the library so other projects can find_package(meshsweeper CONFIG).
 include(GNUInstallDirs)
 include(CMakePackageConfigHelpers)
+# A sanitized static library needs the sanitizer runtime in every program that links it.
+if(MESHSWEEPER_SANITIZE)
+  target_link_options(meshsweeper INTERFACE -fsanitize=${MESHSWEEPER_SANITIZE})
+endif()
 install(TARGETS meshsweeper EXPORT meshsweeperTargets
   ARCHIVE DESTINATION ${CMAKE_INSTALL_LIBDIR}
   LIBRARY DESTINATION ${CMAKE_INSTALL_LIBDIR})

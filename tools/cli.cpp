@@ -1,0 +1,188 @@
+#include "tools/cli.h"
+
+#include <cerrno>
+#include <cmath>
+#include <cstdarg>
+#include <cstdlib>
+#include <cstring>
+
+namespace meshsweeper::cli {
+
+namespace {
+
+constexpr size_t kOutputBufferBytes = 1 << 16;
+
+const OptionSpec* findSpec(const std::vector<OptionSpec>& specs, const std::string& name) {
+  for (const OptionSpec& spec : specs) {
+    if (name == spec.name) return &spec;
+  }
+  return nullptr;
+}
+
+}  // namespace
+
+Args::Args(const char* command, int argc, char** argv, int first,
+           const std::vector<OptionSpec>& specs)
+    : command_(command) {
+  bool options_done = false;
+  for (int i = first; i < argc; ++i) {
+    const std::string arg = argv[i];
+    if (options_done || arg.size() < 2 || arg[0] != '-') {
+      positional_.push_back(arg);
+      continue;
+    }
+    if (arg == "--") {
+      options_done = true;
+      continue;
+    }
+    std::string name = arg;
+    std::string value;
+    bool inline_value = false;
+    const size_t equals = arg.find('=');
+    if (arg.compare(0, 2, "--") == 0 && equals != std::string::npos) {
+      name = arg.substr(0, equals);
+      value = arg.substr(equals + 1);
+      inline_value = true;
+    }
+    const OptionSpec* spec = findSpec(specs, name);
+    if (!spec) throw UsageError(command_ + ": unknown option " + name);
+    if (has(spec->name)) throw UsageError(command_ + ": option " + name + " given twice");
+    if (spec->takes_value) {
+      if (!inline_value) {
+        if (i + 1 >= argc) throw UsageError(command_ + ": option " + name + " needs a value");
+        value = argv[++i];
+      }
+    } else if (inline_value) {
+      throw UsageError(command_ + ": option " + name + " takes no value");
+    }
+    options_.emplace_back(spec->name, value);
+  }
+}
+
+void Args::expectPositional(const std::vector<const char*>& names) const {
+  if (positional_.size() < names.size())
+    throw UsageError(command_ + ": missing argument " + names[positional_.size()]);
+  if (positional_.size() > names.size())
+    throw UsageError(command_ + ": unexpected argument '" + positional_[names.size()] + "'");
+}
+
+bool Args::has(const char* name) const {
+  for (const auto& option : options_) {
+    if (option.first == name) return true;
+  }
+  return false;
+}
+
+const std::string& Args::value(const char* name) const {
+  for (const auto& option : options_) {
+    if (option.first == name) return option.second;
+  }
+  throw UsageError(command_ + ": option " + name + " is required");
+}
+
+double Args::nonNegativeDouble(const char* name) const {
+  const std::string what = command_ + ": " + name;
+  const double x = parseFiniteDouble(value(name), what);
+  if (x < 0) throw UsageError(what + " must not be negative (got " + value(name) + ")");
+  return x;
+}
+
+uint64_t Args::integer(const char* name, uint64_t min, uint64_t max) const {
+  return parseInteger(value(name), command_ + ": " + name, min, max);
+}
+
+uint64_t parseInteger(const std::string& text, const std::string& what, uint64_t min,
+                      uint64_t max) {
+  const std::string range = "an integer in [" + std::to_string(min) + ", " +
+                            std::to_string(max) + "]";
+  if (text.empty() || text.size() > 19 ||
+      text.find_first_not_of("0123456789") != std::string::npos)
+    throw UsageError(what + " must be " + range + " (got '" + text + "')");
+  const uint64_t x = std::strtoull(text.c_str(), nullptr, 10);
+  if (x < min || x > max) throw UsageError(what + " must be " + range + " (got " + text + ")");
+  return x;
+}
+
+double parseFiniteDouble(const std::string& text, const std::string& what) {
+  const char* begin = text.c_str();
+  char* end = nullptr;
+  errno = 0;
+  const double x = std::strtod(begin, &end);
+  if (text.empty() || end != begin + text.size() || errno == ERANGE || !std::isfinite(x))
+    throw UsageError(what + " must be a finite number (got '" + text + "')");
+  return x;
+}
+
+Output::Output(const std::string& path) : path_(path.empty() ? "-" : path) {
+  if (path_ == "-") {
+    file_ = stdout;
+  } else {
+    file_ = std::fopen(path_.c_str(), "wb");
+    if (!file_) throw IoError(path_ + ": cannot open for writing: " + std::strerror(errno));
+    owned_ = true;
+  }
+  buffer_.reserve(kOutputBufferBytes);
+}
+
+Output::~Output() {
+  if (owned_ && file_) std::fclose(file_);
+}
+
+void Output::flushBuffer() {
+  if (!buffer_.empty() && std::fwrite(buffer_.data(), 1, buffer_.size(), file_) != buffer_.size())
+    failed_ = true;
+  buffer_.clear();
+}
+
+void Output::write(const char* data, size_t size) {
+  buffer_.append(data, size);
+  if (buffer_.size() >= kOutputBufferBytes) flushBuffer();
+}
+
+void Output::printf(const char* format, ...) {
+  char line[1024];
+  va_list args;
+  va_start(args, format);
+  const int n = std::vsnprintf(line, sizeof line, format, args);
+  va_end(args);
+  if (n < 0 || static_cast<size_t>(n) >= sizeof line) {
+    failed_ = true;
+    return;
+  }
+  write(line, static_cast<size_t>(n));
+}
+
+void Output::close() {
+  flushBuffer();
+  if (std::fflush(file_) != 0) failed_ = true;
+  if (owned_) {
+    if (std::fclose(file_) != 0) failed_ = true;
+    file_ = nullptr;
+    owned_ = false;
+  }
+  if (failed_) throw IoError(path_ + ": write failed");
+}
+
+std::string jsonString(const std::string& text) {
+  std::string out = "\"";
+  for (unsigned char c : text) {
+    switch (c) {
+      case '"': out += "\\\""; break;
+      case '\\': out += "\\\\"; break;
+      case '\n': out += "\\n"; break;
+      case '\r': out += "\\r"; break;
+      case '\t': out += "\\t"; break;
+      default:
+        if (c < 0x20) {
+          char escaped[8];
+          std::snprintf(escaped, sizeof escaped, "\\u%04x", c);
+          out += escaped;
+        } else {
+          out += static_cast<char>(c);
+        }
+    }
+  }
+  return out + "\"";
+}
+
+}  // namespace meshsweeper::cli

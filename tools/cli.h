@@ -1,0 +1,116 @@
+#pragma once
+// Small, strict command-line helpers shared by the meshsweep subcommands: option parsing,
+// number parsing, output files, timing and JSON text. No external argument-parsing library.
+//
+// Exit codes of the tool: 0 success, 1 an input or output file could not be read, parsed or
+// written (MeshError, IoError), 2 a bad command line (UsageError).
+#include "core/types.h"
+
+#include <chrono>
+#include <cstdint>
+#include <cstdio>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+namespace meshsweeper::cli {
+
+inline constexpr int kExitOk = 0;
+inline constexpr int kExitInput = 1;  // a file could not be read, parsed or written
+inline constexpr int kExitUsage = 2;  // bad command line
+
+// A bad command line: unknown option, missing argument, invalid number. Exit code 2.
+class UsageError : public std::runtime_error {
+ public:
+  using std::runtime_error::runtime_error;
+};
+
+// An output file that cannot be opened or written. Exit code 1.
+class IoError : public std::runtime_error {
+ public:
+  using std::runtime_error::runtime_error;
+};
+
+// One option a subcommand accepts: "--name VALUE" (or "--name=VALUE") when takes_value,
+// else a flag "--name".
+struct OptionSpec {
+  const char* name;  // with the leading "--"
+  bool takes_value;
+};
+
+// The parsed arguments of one subcommand.
+class Args {
+ public:
+  // Parses argv[first..argc). Options may appear anywhere; "--" ends options; "-" alone is a
+  // positional argument (standard input). Throws UsageError on an unknown option, a repeated
+  // option, or an option missing its value. `command` names the subcommand in messages.
+  Args(const char* command, int argc, char** argv, int first, const std::vector<OptionSpec>& specs);
+
+  const std::vector<std::string>& positional() const { return positional_; }
+  // Throws UsageError unless there are exactly `names.size()` positional arguments; the message
+  // names the missing one (e.g. "closest: missing argument POINTS").
+  void expectPositional(const std::vector<const char*>& names) const;
+
+  bool has(const char* name) const;
+  // The value of an option that takes one. Precondition: has(name).
+  const std::string& value(const char* name) const;
+
+  // Typed values, validated strictly. Each throws UsageError naming the option.
+  // A finite double >= 0 (rejects NaN, infinity, negative, trailing garbage).
+  double nonNegativeDouble(const char* name) const;
+  // A decimal integer in [min, max] (digits only: no sign, no exponent, no fraction).
+  uint64_t integer(const char* name, uint64_t min, uint64_t max) const;
+
+ private:
+  std::string command_;
+  std::vector<std::string> positional_;
+  std::vector<std::pair<std::string, std::string>> options_;  // name, value ("" for flags)
+};
+
+// Parses a whole string as a decimal integer in [min, max]; `what` names it in the message.
+// Throws UsageError.
+uint64_t parseInteger(const std::string& text, const std::string& what, uint64_t min, uint64_t max);
+// Parses a whole string as a finite double; throws UsageError.
+double parseFiniteDouble(const std::string& text, const std::string& what);
+
+// An output destination: a file (created or truncated) or standard output for "" or "-".
+// Writes are buffered; close() flushes and throws IoError if anything failed.
+class Output {
+ public:
+  explicit Output(const std::string& path);
+  ~Output();
+  Output(const Output&) = delete;
+  Output& operator=(const Output&) = delete;
+
+  void write(const char* data, size_t size);
+  void write(const std::string& text) { write(text.data(), text.size()); }
+  // printf-style formatted line or fragment (at most 1024 characters per call).
+  void printf(const char* format, ...) __attribute__((format(printf, 2, 3)));
+  // Flushes; throws IoError ("PATH: write failed") if any write failed.
+  void close();
+
+ private:
+  std::string path_;
+  std::FILE* file_ = nullptr;
+  bool owned_ = false;
+  std::string buffer_;
+  bool failed_ = false;
+  void flushBuffer();
+};
+
+// Wall-clock seconds since construction.
+class Timer {
+ public:
+  Timer() : start_(std::chrono::steady_clock::now()) {}
+  double seconds() const {
+    return std::chrono::duration<double>(std::chrono::steady_clock::now() - start_).count();
+  }
+
+ private:
+  std::chrono::steady_clock::time_point start_;
+};
+
+// `text` as a JSON string literal, quotes included.
+std::string jsonString(const std::string& text);
+
+}  // namespace meshsweeper::cli

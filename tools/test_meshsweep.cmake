@@ -1,0 +1,205 @@
+# Tests of the meshsweep command line, run by CTest as
+#   cmake -DMESHSWEEP=... -DEXAMPLE=... -DWORK_DIR=... [-DDATA_DIR=...] -P test_meshsweep.cmake
+# Each case runs the tool once and checks its exit status, and substrings of its standard
+# output and error. Expected rows come from a hand-drawn mesh with exact answers:
+#
+#   v3 (0,1) +-------+ v2 (1,1)     one quad face "4 0 1 2 3", fan-triangulated into
+#            |     / |              triangle 0 = (v0, v1, v2)   below the diagonal
+#            |  1 /  |              triangle 1 = (v0, v2, v3)   above it
+#            |   / 0 |
+#            |  /    |              query points:
+#   v0 (0,0) +-------+ v1 (1,0)       0: (0.75, 0.25,  1)  above triangle 0, distance 1
+#                                     1: (0.25, 0.75, -2)  below triangle 1, distance 2
+#                                     2: (3, -4, 0)        nearest vertex v1, distance sqrt(20)
+cmake_minimum_required(VERSION 3.25)
+foreach(var MESHSWEEP EXAMPLE WORK_DIR)
+  if(NOT DEFINED ${var})
+    message(FATAL_ERROR "test_meshsweep.cmake: -D${var}=... is required")
+  endif()
+endforeach()
+
+foreach(var MESHSWEEP EXAMPLE WORK_DIR)
+  get_filename_component(${var} "${${var}}" ABSOLUTE)
+endforeach()
+
+file(REMOVE_RECURSE "${WORK_DIR}")
+file(MAKE_DIRECTORY "${WORK_DIR}")
+file(WRITE "${WORK_DIR}/quad.off" "OFF\n4 1 0\n0 0 0\n1 0 0\n1 1 0\n0 1 0\n4 0 1 2 3\n")
+file(WRITE "${WORK_DIR}/points.txt"
+  "# three query points\n0.75 0.25 1\n\n0.25 0.75 -2\n3 -4 0   # far corner\n")
+file(WRITE "${WORK_DIR}/short_line.txt" "0 0 0\n1 2\n")
+file(WRITE "${WORK_DIR}/nan_point.txt" "0 0 nan\n")
+file(WRITE "${WORK_DIR}/garbage.off" "this is not a mesh\n")
+
+set(passed 0)
+set(failed 0)
+set(failures "")
+
+# check(NAME RC <exit status> ARGS <arguments...> [INPUT file] [OUT substrings...]
+#       [ERR substrings...] [NOT_OUT substrings...] [COMMAND program])
+function(check name)
+  cmake_parse_arguments(C "" "RC;INPUT;COMMAND" "ARGS;OUT;ERR;NOT_OUT" ${ARGN})
+  if(NOT C_COMMAND)
+    set(C_COMMAND "${MESHSWEEP}")
+  endif()
+  set(input_args "")
+  if(C_INPUT)
+    set(input_args INPUT_FILE "${C_INPUT}")
+  endif()
+  execute_process(COMMAND "${C_COMMAND}" ${C_ARGS}
+    WORKING_DIRECTORY "${WORK_DIR}" ${input_args}
+    RESULT_VARIABLE rc OUTPUT_VARIABLE out ERROR_VARIABLE err)
+  set(problems "")
+  if(NOT "${rc}" STREQUAL "${C_RC}")
+    list(APPEND problems "exit status '${rc}', expected ${C_RC}")
+  endif()
+  foreach(text IN LISTS C_OUT)
+    string(FIND "${out}" "${text}" at)
+    if(at EQUAL -1)
+      list(APPEND problems "stdout lacks '${text}'")
+    endif()
+  endforeach()
+  foreach(text IN LISTS C_NOT_OUT)
+    string(FIND "${out}" "${text}" at)
+    if(NOT at EQUAL -1)
+      list(APPEND problems "stdout has '${text}'")
+    endif()
+  endforeach()
+  foreach(text IN LISTS C_ERR)
+    string(FIND "${err}" "${text}" at)
+    if(at EQUAL -1)
+      list(APPEND problems "stderr lacks '${text}'")
+    endif()
+  endforeach()
+  if(problems)
+    string(REPLACE ";" "\n    " problems "${problems}")
+    message("FAIL ${name}: ${C_ARGS}\n    ${problems}\n  stdout: ${out}\n  stderr: ${err}")
+    math(EXPR failed_now "${failed} + 1")
+    set(failed ${failed_now} PARENT_SCOPE)
+  else()
+    math(EXPR passed_now "${passed} + 1")
+    set(passed ${passed_now} PARENT_SCOPE)
+  endif()
+endfunction()
+
+set(header "point,rank,distance,lower,upper,triangle,x,y,z,b0,b1,b2\n")
+set(row2 "\n2,0,4.4721359549995796,4.4721359549995796,4.4721359549995796,0,1,0,0,0,1,0\n")
+
+# Exact closest points; the fan triangulation decides the triangle indices.
+check(closest RC 0 ARGS closest quad.off points.txt
+  OUT "${header}0,0,1,1,1,0,0.75" "\n1,0,2,2,2,1,0.25" "${row2}"
+  ERR "\"mesh\": \"quad.off\"" "\"vertices\": 4" "\"triangles\": 2" "\"points\": 3"
+      "\"rows\": 3" "\"build_seconds\": " "\"query_seconds\": " "\"mode\": \"closest\"")
+check(closest_stdin RC 0 ARGS closest quad.off - INPUT "${WORK_DIR}/points.txt"
+  OUT "${row2}" ERR "\"rows\": 3")
+check(closest_out_file RC 0 ARGS closest quad.off points.txt --out closest.csv ERR "\"rows\": 3"
+  NOT_OUT "point,rank")
+set(written "")
+if(EXISTS "${WORK_DIR}/closest.csv")
+  file(READ "${WORK_DIR}/closest.csv" written)
+endif()
+string(FIND "${written}" "${header}0,0,1,1,1,0," at)
+if(at EQUAL 0)
+  math(EXPR passed "${passed} + 1")
+else()
+  message("FAIL closest_out_file: closest.csv holds: ${written}")
+  math(EXPR failed "${failed} + 1")
+endif()
+
+# Anytime: tolerance 0 is exact; a large tolerance still answers every point.
+check(anytime_exact RC 0 ARGS closest quad.off points.txt --tolerance 0
+  OUT "\n0,0,1,1,1,0," "\n1,0,2,2,2,1," "${row2}" ERR "\"mode\": \"anytime\"")
+check(anytime_loose RC 0 ARGS closest quad.off points.txt --tolerance=10
+  OUT "\n0,0," "\n1,0," "\n2,0," ERR "\"rows\": 3")
+
+# k closest: ranks by increasing distance; asking for more than the mesh has gives all.
+check(k_closest RC 0 ARGS closest quad.off points.txt --k 2
+  OUT "\n0,0,1,1,1,0," "\n0,1,1.06066017" "\n1,0,2,2,2,1," "\n1,1,2.03100960"
+      "\n2,0,4.4721359549995796," "\n2,1,5,5,5,1,0,0,0,1,0,0\n"
+  ERR "\"rows\": 6" "\"mode\": \"k\"")
+check(k_more_than_triangles RC 0 ARGS closest quad.off points.txt --k 1000 ERR "\"rows\": 6")
+
+# Within D: one row per triangle within D; a point with none prints no row.
+check(within RC 0 ARGS closest quad.off points.txt --within 1.5
+  OUT "\n0,0,1,1,1,0," "\n0,1,1.06066017" NOT_OUT "\n1," "\n2,"
+  ERR "\"rows\": 2" "\"mode\": \"within\"")
+check(within_none RC 0 ARGS closest quad.off points.txt --within 0 OUT "${header}"
+  NOT_OUT "\n0," ERR "\"rows\": 0")
+
+# Help.
+check(help RC 0 ARGS help OUT "closest" "sample")
+check(help_flag RC 0 ARGS --help OUT "Usage: meshsweep COMMAND")
+check(help_closest RC 0 ARGS help closest OUT "point,rank,distance,lower,upper,triangle")
+check(closest_help_flag RC 0 ARGS closest --help OUT "--tolerance")
+check(no_arguments RC 2 ERR "Usage: meshsweep COMMAND")
+
+# Command-line errors: exit status 2, one "meshsweep: " line, never a crash.
+check(unknown_command RC 2 ARGS frobnicate ERR "meshsweep: unknown command 'frobnicate'")
+check(help_unknown RC 2 ARGS help frobnicate ERR "meshsweep: help: unknown command")
+check(missing_points RC 2 ARGS closest quad.off ERR "meshsweep: closest: missing argument POINTS")
+check(missing_mesh RC 2 ARGS closest ERR "meshsweep: closest: missing argument MESH")
+check(extra_argument RC 2 ARGS closest quad.off points.txt extra ERR "unexpected argument 'extra'")
+check(unknown_option RC 2 ARGS closest quad.off points.txt --fast
+  ERR "meshsweep: closest: unknown option --fast")
+check(missing_value RC 2 ARGS closest quad.off points.txt --tolerance ERR "needs a value")
+check(negative_tolerance RC 2 ARGS closest quad.off points.txt --tolerance -1 ERR "negative")
+check(nan_tolerance RC 2 ARGS closest quad.off points.txt --tolerance nan ERR "finite")
+check(inf_within RC 2 ARGS closest quad.off points.txt --within inf ERR "finite")
+check(negative_within RC 2 ARGS closest quad.off points.txt --within -0.5 ERR "negative")
+check(garbage_tolerance RC 2 ARGS closest quad.off points.txt --tolerance 1e-3x ERR "finite")
+check(zero_k RC 2 ARGS closest quad.off points.txt --k 0 ERR "--k must be an integer")
+check(negative_k RC 2 ARGS closest quad.off points.txt --k -3 ERR "--k must be an integer")
+check(fraction_k RC 2 ARGS closest quad.off points.txt --k 1.5 ERR "--k must be an integer")
+check(huge_k RC 2 ARGS closest quad.off points.txt --k 99999999999999999999 ERR "--k must be")
+check(k_and_within RC 2 ARGS closest quad.off points.txt --k 2 --within 1 ERR "cannot be combined")
+check(repeated_option RC 2 ARGS closest quad.off points.txt --k 2 --k 3 ERR "given twice")
+
+# Input and output file errors: exit status 1.
+check(no_mesh_file RC 1 ARGS closest absent.off points.txt ERR "meshsweep: " "absent.off")
+check(garbage_mesh RC 1 ARGS closest garbage.off points.txt ERR "meshsweep: " "garbage.off")
+check(no_points_file RC 1 ARGS closest quad.off absent.txt ERR "meshsweep: " "absent.txt")
+check(short_point_line RC 1 ARGS closest quad.off short_line.txt ERR "meshsweep: " "short_line.txt")
+check(nan_point RC 1 ARGS closest quad.off nan_point.txt ERR "meshsweep: " "nan_point.txt")
+check(unwritable_out RC 1 ARGS closest quad.off points.txt --out no/such/dir/out.csv
+  ERR "meshsweep: no/such/dir/out.csv")
+
+# sample: reproducible, readable by closest.
+check(sample RC 0 ARGS sample quad.off 5 --near 0.01 --seed 7 --out sample_a.txt)
+check(sample_again RC 0 ARGS sample quad.off 5 --near=0.01 --seed=7 --out sample_b.txt)
+set(sample_a "")
+set(sample_b "")
+if(EXISTS "${WORK_DIR}/sample_a.txt" AND EXISTS "${WORK_DIR}/sample_b.txt")
+  file(READ "${WORK_DIR}/sample_a.txt" sample_a)
+  file(READ "${WORK_DIR}/sample_b.txt" sample_b)
+endif()
+if(sample_a STREQUAL sample_b AND NOT sample_a STREQUAL "")
+  math(EXPR passed "${passed} + 1")
+else()
+  message("FAIL sample_reproducible:\n${sample_a}\n---\n${sample_b}")
+  math(EXPR failed "${failed} + 1")
+endif()
+check(sample_then_closest RC 0 ARGS closest quad.off sample_a.txt ERR "\"points\": 5" "\"rows\": 5")
+check(sample_box RC 0 ARGS sample quad.off 3 OUT "# meshsweep sample quad.off 3 --box 0.1 --seed 1")
+check(sample_zero RC 2 ARGS sample quad.off 0 ERR "sample: N must be an integer")
+check(sample_two_modes RC 2 ARGS sample quad.off 3 --near 0.1 --box 0.1 ERR "cannot be combined")
+check(sample_no_mesh RC 1 ARGS sample absent.off 3 ERR "meshsweep: " "absent.off")
+
+# The README's library example.
+check(example RC 0 COMMAND "${EXAMPLE}" ARGS quad.off 0.75 0.25 1
+  OUT "distance 1, triangle 0, point (0.75, 0.25, 0)")
+check(example_bad_mesh RC 1 COMMAND "${EXAMPLE}" ARGS absent.off 0 0 0 ERR "closest_example: ")
+
+# A real mesh, when scripts/fetch_data.sh has extracted them.
+if(DATA_DIR AND EXISTS "${DATA_DIR}/armadillo.off")
+  check(real_sample RC 0 ARGS sample "${DATA_DIR}/armadillo.off" 200 --near 0.01 --seed 1
+    --out real_points.txt)
+  check(real_closest RC 0 ARGS closest "${DATA_DIR}/armadillo.off" real_points.txt
+    --out real.csv ERR "\"points\": 200" "\"rows\": 200")
+  check(real_k RC 0 ARGS closest "${DATA_DIR}/armadillo.off" real_points.txt --k 3
+    --out real_k.csv ERR "\"rows\": 600")
+endif()
+
+message("meshsweep_cli: ${passed} passed, ${failed} failed")
+if(failed GREATER 0)
+  message(FATAL_ERROR "meshsweep_cli: ${failed} case(s) failed")
+endif()

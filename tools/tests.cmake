@@ -1,0 +1,18 @@
+# CTest entries for the command-line tool and the install; included from tests/CMakeLists.txt
+# (CTest only sees tests registered after enable_testing()).
+if(TARGET meshsweep)
+  add_test(NAME meshsweep_cli COMMAND ${CMAKE_COMMAND}
+    -DMESHSWEEP=$<TARGET_FILE:meshsweep> -DEXAMPLE=$<TARGET_FILE:closest_example>
+    -DWORK_DIR=${CMAKE_CURRENT_BINARY_DIR}/meshsweep_cli -DDATA_DIR=${MESHSWEEPER_DATA_DIR}
+    -P ${PROJECT_SOURCE_DIR}/tools/test_meshsweep.cmake)
+endif()
+
+# Installs the build into a temporary prefix and builds examples/ against it with
+# find_package(meshsweeper CONFIG REQUIRED).
+add_test(NAME install_consumer COMMAND ${CMAKE_COMMAND}
+  -DBUILD_DIR=${PROJECT_BINARY_DIR} -DSOURCE_DIR=${PROJECT_SOURCE_DIR}
+  -DWORK_DIR=${CMAKE_CURRENT_BINARY_DIR}/install_consumer
+  -DGENERATOR=${CMAKE_GENERATOR} -DCXX_COMPILER=${CMAKE_CXX_COMPILER}
+  -DBUILD_TYPE=${CMAKE_BUILD_TYPE}
+  -P ${PROJECT_SOURCE_DIR}/tests/test_install.cmake)
+set_tests_properties(install_consumer PROPERTIES TIMEOUT 600)
