@@ -1,0 +1,882 @@
+// Certified Hausdorff distance between meshes (Guéziec, "Meshsweeper", section 6 and Fig. 9;
+// DESIGN.md section 4).
+//
+// One direction, h(A, B) (a "cell" is a triangle of A or a piece of one after splits):
+//   vertex pass: query every vertex of A on B, in Morton order, in fixed chunks (one query
+//     stream per thread); LB <- the largest vertex distance
+//   every triangle of A is a cell; UB(cell) <- min(bisector bound, face bound) (below)
+//   max-heap of cells on UB
+//   repeat (round):
+//     threshold <- LB + tol   (symmetric: the larger LB of the two directions + tol)
+//     pop up to `batch` cells with UB > threshold (the highest first)
+//     their edge midpoints: one sample per edge, shared with every cell that has that edge
+//       (hash map keyed by the edge's two sample ids); query the new ones (parallel chunks)
+//     LB <- max(LB, new sample distances)
+//     each popped cell -> 4 children (corners and edge midpoints); bound each child;
+//       push it if its UB > threshold, else it is final ("dropped")
+//   until the highest UB <= threshold
+//   upper = max(LB, highest UB left, highest UB dropped) <= LB + tol
+//
+// Both directions: refine, each round, the direction whose highest UB is larger; cells of
+// either direction are dropped once their UB is within tol of the larger LB, so the direction
+// that cannot change H stops being refined as soon as that is proven (paper section 6).
+//
+// Determinism: every sample's distance comes from an exact query whose answer does not depend
+// on the stream's history, chunks and batches are fixed by the data (not by the thread count),
+// and every reduction (LB, heap pushes, sums) runs sequentially in sample/cell order. So 1 and
+// N threads give bit-identical results.
+//
+// ---- The bisector bound (paper Fig. 9) ----
+// Corners v0, v1, v2 of a cell t, with points c0, c1, c2 of B (their closest points). For any
+// x, d(x, B) <= f(x) = min_i |x - c_i|. The region R_i = {x in t : |x - c_i| <= |x - c_j| for
+// all j} is t cut by half-planes h_ij(x) = |x - c_i|^2 - |x - c_j|^2 <= 0, and h_ij is affine
+// in x: h_ij(x) = (c_j - c_i) . (2x - c_i - c_j). So R_i is a convex polygon, f = |x - c_i| is
+// convex on it and peaks at one of its vertices: a corner of t, a crossing of a bisector plane
+// h_ij = 0 with an edge of t, or the point of t's plane where h_01 = h_02 = 0 (equidistant from
+// all three; only when it lies inside t). max over t of f is the largest f over these
+// candidates (identical c_i are merged; with two distinct points there is one bisector and no
+// triple point; on a degenerate t, a segment, the crossings on its edges suffice).
+// Rounding: a candidate computed at x' instead of x* (|x' - x*| <= delta, from a first-order
+// error bound of its construction) gives f(x*) <= f(x') + delta, since f is 1-Lipschitz; each
+// candidate is also capped by a bound valid for every point of t (or of its edge):
+// max over t of |x - c_i| = max_k |v_k - c_i| by convexity. An ill-conditioned triple point
+// (planes nearly parallel to t) thus costs the cap, never a wrong bound. It is skipped when
+// the circumradius of c0 c1 c2 exceeds the cap (then f > cap there, so it is not in t).
+//
+// ---- The face bound ----
+// d(x, T) for one triangle T of B is convex in x, so over t it peaks at a corner:
+// d(x, B) <= min over T in {T0, T1, T2} (the corners' closest triangles) of max_k d(v_k, T).
+// The same holds for any convex piece P of t with P's corners. So t is also bounded piecewise
+// over the four pieces of its midpoint split (the corner triangles (v_k, m_k,k+1, m_k-1,k) and
+// the middle one (m01, m12, m20)): max over pieces P of min over T of max over P's corners of
+// d(y, T). This is never above the whole-triangle face bound (each piece lies in t) and much
+// lower when the corners' closest triangles differ, since each corner piece uses its own; on
+// the armadillo and mannequin pairs it cut the triangles refined by about 40% (the bound is
+// evaluated only when the bisector bound does not already make the cell final).
+// UB(t) = min(bisector bound, face bound, piecewise face bound).
+//
+// Each bound gets a margin of 1e-12 times the largest coordinate magnitude of A and B, which
+// covers the rounding of the distances themselves.
+#include "core/hausdorff.h"
+
+#include "core/sweep_query.h"
+
+#include <Eigen/Geometry>
+
+#include <tbb/blocked_range.h>
+#include <tbb/enumerable_thread_specific.h>
+#include <tbb/parallel_for.h>
+#include <tbb/parallel_invoke.h>
+#include <tbb/task_arena.h>
+
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <cmath>
+#include <limits>
+#include <stdexcept>
+#include <string>
+
+namespace meshsweeper {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+double secondsSince(Clock::time_point start) {
+  return std::chrono::duration<double>(Clock::now() - start).count();
+}
+
+static const int g_mode = getenv("HD_MODE") ? atoi(getenv("HD_MODE")) : 0;
+static const float g_reach = getenv("HD_REACH") ? atof(getenv("HD_REACH")) : 0;
+constexpr double kInf = std::numeric_limits<double>::infinity();
+constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
+constexpr double kEps = std::numeric_limits<double>::epsilon();
+// Margin added to every upper bound, relative to the largest coordinate magnitude.
+constexpr double kMarginRelative = 1e-12;
+// Samples per query chunk (fixed: the work decomposition must not depend on thread count).
+constexpr size_t kQueryChunk = 64;
+// Cells per bounding chunk.
+constexpr size_t kCellChunk = 64;
+// Cells popped per refinement round: max(kMinBatch, heap size / kBatchDivisor), at most
+// kMaxBatch. Larger batches parallelise better but may split cells that a sample of an earlier
+// cell of the same round would have made final.
+constexpr size_t kMinBatch = 64;
+constexpr size_t kBatchDivisor = 16;
+constexpr size_t kMaxBatch = 8192;
+// A cell 2^-kMaxDepth the size of its triangle is not split further.
+constexpr uint8_t kMaxDepth = 48;
+
+// ---- Samples and cells -----------------------------------------------------------------
+
+struct Sample {
+  Vec3 position = Vec3::Zero();  // a point of A
+  Vec3 closest = Vec3::Zero();   // its closest point on B
+  double distance = kNaN;        // exact distance to B (NaN: not queried, unused vertex)
+  TriangleIndex closest_triangle = kInvalidIndex;  // [triangle of B]
+  TriangleIndex source = kInvalidIndex;            // [triangle of A] one that contains it
+};
+
+struct Cell {
+  uint32_t corner[3];    // [sample]
+  TriangleIndex source;  // [triangle of A] the original triangle it is a piece of
+  double upper;          // certified bound of d(x, B) over the cell
+  uint8_t depth;         // 0 for an original triangle
+  bool split;            // replaced by its four children
+};
+
+// Edge (two sample ids) -> midpoint sample id; open addressing, linear probing.
+class EdgeMap {
+ public:
+  // Returns the value stored for (a, b) or inserts `fresh` and returns it.
+  uint32_t findOrInsert(uint32_t a, uint32_t b, uint32_t fresh, bool& inserted) {
+    if (a > b) std::swap(a, b);
+    const uint64_t key = (static_cast<uint64_t>(a) << 32 | b) + 1;  // 0 marks an empty slot
+    if (2 * (size_ + 1) > keys_.size()) grow();
+    size_t i = slot(key);
+    while (keys_[i] != 0) {
+      if (keys_[i] == key) {
+        inserted = false;
+        return values_[i];
+      }
+      i = (i + 1) & (keys_.size() - 1);
+    }
+    keys_[i] = key;
+    values_[i] = fresh;
+    ++size_;
+    inserted = true;
+    return fresh;
+  }
+
+ private:
+  std::vector<uint64_t> keys_;
+  std::vector<uint32_t> values_;
+  size_t size_ = 0;
+  int shift_ = 64;
+
+  size_t slot(uint64_t key) const {
+    return static_cast<size_t>((key * 0x9E3779B97F4A7C15ull) >> shift_);
+  }
+  void grow() {
+    std::vector<uint64_t> keys = std::move(keys_);
+    std::vector<uint32_t> values = std::move(values_);
+    const size_t capacity = std::max<size_t>(1024, 2 * keys.size());
+    keys_.assign(capacity, 0);
+    values_.assign(capacity, 0);
+    shift_ = 64 - static_cast<int>(std::log2(static_cast<double>(capacity)));
+    for (size_t j = 0; j < keys.size(); ++j) {
+      if (keys[j] == 0) continue;
+      size_t i = slot(keys[j]);
+      while (keys_[i] != 0) i = (i + 1) & (capacity - 1);
+      keys_[i] = keys[j];
+      values_[i] = values[j];
+    }
+  }
+};
+
+// ---- Bounds over one cell --------------------------------------------------------------
+
+struct CellBound {
+  double upper;
+  bool face_won;
+};
+
+// f(x) = min over the distinct points c of |x - c|.
+inline double nearestOf(const Vec3& x, const Vec3* c, int n) {
+  double best2 = (x - c[0]).squaredNorm();
+  for (int i = 1; i < n; ++i) best2 = std::min(best2, (x - c[i]).squaredNorm());
+  return std::sqrt(best2);
+}
+
+// The bisector bound without margin: max over t = (v0, v1, v2) of min_i |x - c_i|.
+// `scale` is the largest coordinate magnitude (for the rounding error bounds).
+double bisectorBound(const Vec3 v[3], const Vec3 c_in[3], double scale) {
+  Vec3 c[3];
+  int n = 0;
+  for (int i = 0; i < 3; ++i) {
+    bool seen = false;
+    for (int j = 0; j < n; ++j) seen = seen || c[j] == c_in[i];
+    if (!seen) c[n++] = c_in[i];
+  }
+  double best = 0;
+  for (int k = 0; k < 3; ++k) best = std::max(best, nearestOf(v[k], c, n));
+  if (n == 1) return best;
+
+  // cap_i = max over t of |x - c_i|; cap = min_i cap_i bounds f everywhere on t.
+  double cap_i[3];
+  double cap = kInf;
+  for (int i = 0; i < n; ++i) {
+    double m = 0;
+    for (int k = 0; k < 3; ++k) m = std::max(m, (v[k] - c[i]).squaredNorm());
+    cap_i[i] = std::sqrt(m);
+    cap = std::min(cap, cap_i[i]);
+  }
+  if (best >= cap) return best;  // f <= cap everywhere and a corner reaches it
+
+  // Bisector planes crossing the edges.
+  for (int i = 0; i < n; ++i) {
+    for (int j = i + 1; j < n; ++j) {
+      const Vec3 delta = c[j] - c[i];
+      const Vec3 sum = c[i] + c[j];
+      const double err_h =
+          64 * kEps * std::sqrt(delta.squaredNorm()) * scale;  // error of an h value
+      double h[3];
+      for (int k = 0; k < 3; ++k) h[k] = delta.dot(2 * v[k] - sum);
+      for (int k = 0; k < 3; ++k) {
+        const int l = (k + 1) % 3;
+        if (!((h[k] < 0 && h[l] > 0) || (h[k] > 0 && h[l] < 0))) continue;
+        const double s = std::clamp(h[k] / (h[k] - h[l]), 0.0, 1.0);
+        const Vec3 edge = v[l] - v[k];
+        const Vec3 x = v[k] + s * edge;
+        const double delta_x = 3 * err_h / std::abs(h[k] - h[l]) * edge.norm();
+        const double value = nearestOf(x, c, n) + delta_x;
+        if (value <= best) continue;
+        const double edge_cap2 =
+            std::min(std::max((v[k] - c[i]).squaredNorm(), (v[l] - c[i]).squaredNorm()),
+                     std::max((v[k] - c[j]).squaredNorm(), (v[l] - c[j]).squaredNorm()));
+        best = std::max(best, std::min(value, std::sqrt(edge_cap2)));
+      }
+    }
+  }
+  if (n < 3 || best >= cap) return std::min(best, cap);
+
+  // The triple point, only if it may lie in t: its distance to the c_i is at least the
+  // circumradius of c0 c1 c2, and f <= cap on t.
+  const Vec3 a = c[1] - c[0], b = c[2] - c[0];
+  const double na = a.norm(), nb = b.norm(), nab = (b - a).norm();
+  const double cross = a.cross(b).norm();
+  const double radius_low = na * nb * nab / (2 * (cross + 16 * kEps * na * nb)) * (1 - 1e-12);
+  if (!(radius_low <= cap)) return best;
+
+  const Vec3 e1 = v[1] - v[0], e2 = v[2] - v[0];
+  const Vec3 sum1 = c[0] + c[1], sum2 = c[0] + c[2];
+  // h_01 = 0 and h_02 = 0 at v0 + u e1 + w e2:  G (u, w) = r.
+  const double g1x = 2 * a.dot(e1), g1y = 2 * a.dot(e2);
+  const double g2x = 2 * b.dot(e1), g2y = 2 * b.dot(e2);
+  const double r1 = -a.dot(2 * v[0] - sum1), r2 = -b.dot(2 * v[0] - sum2);
+  const double det = g1x * g2y - g1y * g2x;
+  const double ne = std::max(e1.norm(), e2.norm());
+  const double nab2 = std::sqrt(na * na + nb * nb);
+  const double err_g = 64 * kEps * nab2 * ne;  // norm of the error of G
+  const double err_r = 64 * kEps * nab2 * scale;
+  const double g_norm = std::sqrt(g1x * g1x + g1y * g1y + g2x * g2x + g2y * g2y);
+  const double inv_norm = g_norm / std::abs(det);  // >= |G^-1|
+  double value = cap;
+  if (det != 0 && std::isfinite(inv_norm) && inv_norm * err_g <= 0.5) {
+    const double u = (r1 * g2y - r2 * g1y) / det;
+    const double w = (g1x * r2 - g2x * r1) / det;
+    // First-order perturbation bound, doubled for the second-order terms.
+    const double err_uw = 2 * 2 * inv_norm * (err_g * std::sqrt(u * u + w * w) + err_r);
+    const double delta_x = err_uw * (e1.norm() + e2.norm());
+    Vec3 x = v[0] + u * e1 + w * e2;
+    if (u < 0 || w < 0 || u + w > 1) {
+      // Outside t as computed: the projection onto t is within delta_x of the true point if
+      // the true point is in t (projection onto a convex set does not expand distances).
+      const TriangleClosest p = closestPointOnTriangle(x, v[0], v[1], v[2]);
+      if (std::sqrt(p.squared_distance) > delta_x) return best;  // not in t
+      x = p.point;
+    }
+    if (!std::isfinite(delta_x)) return std::max(best, cap);
+    value = std::min(nearestOf(x, c, n) + delta_x, cap);
+  }
+  return std::max(best, value);
+}
+
+// A ball around each triangle of B (centroid, farthest corner): a cheap lower bound on the
+// distance to the triangle, to abandon face-bound candidates early.
+struct TriangleBall {
+  Vec3 centre;
+  double radius;
+};
+
+std::vector<TriangleBall> triangleBalls(const Mesh& b) {
+  std::vector<TriangleBall> balls(b.triangles.size());
+  for (size_t f = 0; f < balls.size(); ++f) {
+    const Triangle& t = b.triangles[f];
+    const Vec3 centre = (b.positions[t[0]] + b.positions[t[1]] + b.positions[t[2]]) / 3;
+    double r2 = 0;
+    for (VertexIndex v : t) r2 = std::max(r2, (b.positions[v] - centre).squaredNorm());
+    balls[f] = {centre, std::sqrt(r2) * (1 + 1e-12)};
+  }
+  return balls;
+}
+
+// An upper bound of d(x, B) over the cell (s0, s1, s2). Only whether it is <= `enough` (the
+// cell is then final) matters for cells that will be split anyway, so the costlier face bounds
+// are tried only when the bisector bound is above `enough`, and only until they prove or fail
+// to prove `enough`: the result is the first bound <= `enough` found, else the bisector bound.
+CellBound boundCell(const Sample& s0, const Sample& s1, const Sample& s2, const Mesh& b,
+                    const std::vector<TriangleBall>& balls, double scale, double margin,
+                    double enough) {
+  const Sample* s[3] = {&s0, &s1, &s2};
+  // One closest triangle for all corners: the face bound is exact at the corners.
+  if (s0.closest_triangle == s1.closest_triangle && s0.closest_triangle == s2.closest_triangle)
+    return {std::max({s0.distance, s1.distance, s2.distance}) * (1 + 1e-13) + margin, true};
+  const Vec3 v[3] = {s0.position, s1.position, s2.position};
+  const Vec3 c[3] = {s0.closest, s1.closest, s2.closest};
+  const double bisector = bisectorBound(v, c, scale) + margin;
+  if (bisector <= enough) return {bisector, false};
+  // Squared distances below target2 give a bound <= enough once the margins are added.
+  const double target = (enough - margin) / (1 + 1e-13);
+  if (!(target > 0)) return {bisector, false};
+  const double target2 = target * target;
+  auto bound = [&](double squared) {
+    return CellBound{std::sqrt(squared) * (1 + 1e-13) + margin, true};
+  };
+
+  // Candidates: the corners' closest triangles.
+  TriangleIndex candidates[3];
+  int count = 0;
+  for (int k = 0; k < 3; ++k) {
+    bool seen = false;
+    for (int u = 0; u < count; ++u) seen = seen || candidates[u] == s[k]->closest_triangle;
+    if (!seen) candidates[count++] = s[k]->closest_triangle;
+  }
+  // max(known2, squared distances from `points` to `candidate`), or a value > target2 as soon
+  // as one point (by the triangle's ball, then exactly) exceeds it.
+  auto farthest2 = [&](TriangleIndex candidate, const Vec3* points, int n, double known2) {
+    const TriangleBall& ball = balls[candidate];
+    const double reach = ball.radius + target;
+    for (int q = 0; q < n; ++q)
+      if ((points[q] - ball.centre).squaredNorm() >= reach * reach) return kInf;
+    const Triangle& tri = b.triangles[candidate];
+    const Vec3& p0 = b.positions[tri[0]];
+    const Vec3& p1 = b.positions[tri[1]];
+    const Vec3& p2 = b.positions[tri[2]];
+    double m = known2;
+    for (int q = 0; q < n && m <= target2; ++q)
+      m = std::max(m, squaredDistanceToTriangle(points[q], p0, p1, p2));
+    return m;
+  };
+  // The known squared distance of corner k to `candidate`, or 0 when not known.
+  auto known2 = [&](int k, TriangleIndex candidate) {
+    return s[k]->closest_triangle == candidate ? s[k]->distance * s[k]->distance : 0.0;
+  };
+
+  // Face bound over the whole cell: the corners whose closest triangle is the candidate are
+  // known; the others are computed.
+  for (int u = 0; u < count; ++u) {
+    Vec3 others[3];
+    int n = 0;
+    double known = 0;
+    for (int k = 0; k < 3; ++k) {
+      if (s[k]->closest_triangle == candidates[u])
+        known = std::max(known, known2(k, candidates[u]));
+      else
+        others[n++] = v[k];
+    }
+    const double m = farthest2(candidates[u], others, n, known);
+    if (m <= target2) return bound(m);
+  }
+
+  // Face bound over the pieces of the midpoint split: the corner triangles
+  // (v_k, m_k,k+1, m_k-1,k), each trying its own corner's closest triangle first, and the
+  // middle one (m01, m12, m20). Every piece must get below target2 with some candidate.
+  const Vec3 mid[3] = {0.5 * (v[0] + v[1]), 0.5 * (v[1] + v[2]), 0.5 * (v[2] + v[0])};
+  double pieces2 = 0;
+  for (int k = 0; k <= 3; ++k) {
+    Vec3 points[3];
+    int n = 0;
+    if (k < 3) {
+      points[n++] = mid[k];
+      points[n++] = mid[(k + 2) % 3];
+    } else {
+      points[0] = mid[0], points[1] = mid[1], points[2] = mid[2];
+      n = 3;
+    }
+    const TriangleIndex first = s[k % 3]->closest_triangle;
+    double piece2 = kInf;
+    for (int u = -1; u < count && !(piece2 <= target2); ++u) {
+      const TriangleIndex candidate = u < 0 ? first : candidates[u];
+      if (u >= 0 && candidate == first) continue;
+      if (k < 3 && s[k]->closest_triangle != candidate) {
+        points[n] = v[k];  // the corner's distance to this candidate is not known
+        piece2 = farthest2(candidate, points, n + 1, 0);
+      } else {
+        piece2 = farthest2(candidate, points, n, k < 3 ? known2(k, candidate) : 0.0);
+      }
+    }
+    if (!(piece2 <= target2)) return {bisector, false};
+    pieces2 = std::max(pieces2, piece2);
+  }
+  return bound(pieces2);
+}
+
+// ---- Parallel helpers ------------------------------------------------------------------
+
+// Runs body(begin, end) over [0, n) in fixed chunks of `chunk`, in parallel.
+template <class Body>
+void forChunks(size_t n, size_t chunk, bool parallel, const Body& body) {
+  const size_t chunks = (n + chunk - 1) / chunk;
+  if (!parallel || chunks <= 1) {
+    for (size_t c = 0; c < chunks; ++c) body(c * chunk, std::min(n, (c + 1) * chunk));
+    return;
+  }
+  tbb::parallel_for(
+      tbb::blocked_range<size_t>(0, chunks, 1),
+      [&](const tbb::blocked_range<size_t>& r) {
+        for (size_t c = r.begin(); c != r.end(); ++c) body(c * chunk, std::min(n, (c + 1) * chunk));
+      },
+      tbb::simple_partitioner());
+}
+
+// Spreads the low 21 bits of x so that two zero bits separate each bit (Morton codes).
+uint64_t spreadBits(uint64_t x) {
+  x &= 0x1fffff;
+  x = (x | x << 32) & 0x1f00000000ffffull;
+  x = (x | x << 16) & 0x1f0000ff0000ffull;
+  x = (x | x << 8) & 0x100f00f00f00f00full;
+  x = (x | x << 4) & 0x10c30c30c30c30c3ull;
+  x = (x | x << 2) & 0x1249249249249249ull;
+  return x;
+}
+
+double largestCoordinate(const Mesh& mesh) {
+  double m = 0;
+  for (const Triangle& t : mesh.triangles)
+    for (VertexIndex v : t) m = std::max(m, mesh.positions[v].cwiseAbs().maxCoeff());
+  return m;
+}
+
+// ---- One direction ---------------------------------------------------------------------
+
+class Direction {
+ public:
+  Direction(const Mesh& from, std::shared_ptr<const Hierarchy> to, double scale, bool parallel)
+      : from_(from),
+        to_(std::move(to)),
+        scale_(scale),
+        margin_(kMarginRelative * scale),
+        parallel_(parallel),
+        streams_(to_),
+        balls_(triangleBalls(to_->mesh())) {}
+
+  // Queries every used vertex of A (Morton order, fixed chunks); LB <- the largest distance.
+  void sampleVertices() {
+    const Mesh& a = from_;
+    const size_t nv = a.positions.size();
+    samples_.assign(nv, Sample{});
+    std::vector<uint8_t> used(nv, 0);
+    for (TriangleIndex f = 0; f < a.triangles.size(); ++f) {
+      for (VertexIndex v : a.triangles[f]) {
+        if (!used[v]) {
+          used[v] = 1;
+          samples_[v].source = f;
+        }
+      }
+    }
+    Vec3 upper;
+    meshBounds(a, box_lower_, upper);
+    box_extent_ = (upper - box_lower_).cwiseMax(1e-300);
+    std::vector<std::pair<uint64_t, VertexIndex>> order;
+    order.reserve(nv);
+    for (VertexIndex v = 0; v < nv; ++v) {
+      if (!used[v]) continue;
+      samples_[v].position = a.positions[v];
+      order.emplace_back(mortonCode(a.positions[v]), v);
+    }
+    std::sort(order.begin(), order.end());
+    std::vector<uint32_t> ids(order.size());
+    for (size_t i = 0; i < order.size(); ++i) ids[i] = order[i].second;
+    querySamples(ids);
+    for (VertexIndex v = 0; v < nv; ++v) {
+      if (used[v] && samples_[v].distance > lb_) {
+        lb_ = samples_[v].distance;
+        lb_sample_ = v;
+      }
+    }
+  }
+
+  // Bounds every triangle of A; those above max(LB, other_lower) + tol go to the heap.
+  void boundTriangles(double other_lower, double tol) {
+    const Mesh& a = from_;
+    const double threshold = std::max(lb_, other_lower) + tol;
+    const size_t nt = a.triangles.size();
+    cells_.resize(nt);
+    forChunks(nt, kCellChunk * 16, parallel_, [&](size_t begin, size_t end) {
+      uint64_t wins = 0;
+      for (size_t f = begin; f < end; ++f) {
+        const Triangle& t = a.triangles[f];
+        Cell& cell = cells_[f];
+        cell = Cell{{t[0], t[1], t[2]}, static_cast<TriangleIndex>(f), 0, 0, false};
+        const CellBound bound = boundCell(samples_[t[0]], samples_[t[1]], samples_[t[2]],
+                                          to_->mesh(), balls_, scale_, margin_, threshold);
+        cell.upper = bound.upper;
+        wins += bound.face_won;
+      }
+      face_wins_ += wins;
+    });
+    counters_.cells = nt;
+    heap_.clear();
+    for (uint32_t f = 0; f < nt; ++f) pushOrDrop(f, threshold);
+  }
+
+  double lower() const { return lb_; }
+  double topUpper() const { return heap_.empty() ? -kInf : heap_.front().upper; }
+  double upper() const { return std::max({lb_, topUpper(), dropped_upper_}); }
+  uint64_t samples() const { return counters_.samples; }
+  bool converged() const { return converged_; }
+
+  // One round: splits up to a batch of the highest cells above the threshold
+  // max(LB, other_lower) + tol (other_lower: the other direction's LB, or -inf).
+  void refine(double other_lower, double tol) {
+    double threshold = std::max(lb_, other_lower) + tol;
+    const size_t batch_size = std::clamp(heap_.size() / kBatchDivisor, kMinBatch, kMaxBatch);
+    batch_.clear();
+    while (batch_.size() < batch_size && !heap_.empty()) {
+      const uint32_t top = heap_.front().cell;
+      if (cells_[top].upper <= threshold) break;
+      std::pop_heap(heap_.begin(), heap_.end(), heapBefore);
+      heap_.pop_back();
+      if (cells_[top].depth >= kMaxDepth) {  // below rounding size: keep its bound as is
+        dropped_upper_ = std::max(dropped_upper_, cells_[top].upper);
+        converged_ = false;
+        continue;
+      }
+      batch_.push_back(top);
+    }
+    ++counters_.rounds;
+    if (batch_.empty()) return;
+
+    // Midpoint samples, shared through the edge map.
+    const uint32_t first_new = static_cast<uint32_t>(samples_.size());
+    mids_.resize(3 * batch_.size());
+    for (size_t i = 0; i < batch_.size(); ++i) {
+      const Cell cell = cells_[batch_[i]];
+      for (int k = 0; k < 3; ++k) {
+        const uint32_t s = cell.corner[k], t = cell.corner[(k + 1) % 3];
+        if (s == t) {
+          mids_[3 * i + k] = s;
+          continue;
+        }
+        bool inserted = false;
+        const uint32_t id =
+            edges_.findOrInsert(s, t, static_cast<uint32_t>(samples_.size()), inserted);
+        mids_[3 * i + k] = id;
+        if (!inserted) continue;
+        Sample m;
+        m.position = 0.5 * (samples_[s].position + samples_[t].position);
+        m.source = cell.source;
+        samples_.push_back(m);
+      }
+    }
+    // Queried in Morton order (nearby queries touch the same nodes), a fixed order.
+    order_.resize(samples_.size() - first_new);
+    for (uint32_t id = first_new; id < samples_.size(); ++id)
+      order_[id - first_new] = {mortonCode(samples_[id].position), id};
+    std::sort(order_.begin(), order_.end());
+    new_ids_.resize(order_.size());
+    for (size_t i = 0; i < order_.size(); ++i) new_ids_[i] = order_[i].second;
+    querySamples(new_ids_);
+    for (uint32_t id = first_new; id < samples_.size(); ++id) {
+      if (samples_[id].distance > lb_) {
+        lb_ = samples_[id].distance;
+        lb_sample_ = id;
+      }
+    }
+    threshold = std::max(lb_, other_lower) + tol;  // LB may have risen
+
+    // Children: (s0 m01 m20) (m01 s1 m12) (m20 m12 s2) (m01 m12 m20).
+    const uint32_t first_child = static_cast<uint32_t>(cells_.size());
+    cells_.resize(cells_.size() + 4 * batch_.size());
+    forChunks(batch_.size(), kCellChunk, parallel_, [&](size_t begin, size_t end) {
+      uint64_t wins = 0;
+      for (size_t i = begin; i < end; ++i) {
+        Cell& parent = cells_[batch_[i]];
+        parent.split = true;
+        const uint32_t s0 = parent.corner[0], s1 = parent.corner[1], s2 = parent.corner[2];
+        const uint32_t m01 = mids_[3 * i], m12 = mids_[3 * i + 1], m20 = mids_[3 * i + 2];
+        const uint32_t corners[4][3] = {
+            {s0, m01, m20}, {m01, s1, m12}, {m20, m12, s2}, {m01, m12, m20}};
+        for (int k = 0; k < 4; ++k) {
+          Cell& child = cells_[first_child + 4 * i + k];
+          child = Cell{{corners[k][0], corners[k][1], corners[k][2]},
+                       parent.source,
+                       0,
+                       static_cast<uint8_t>(parent.depth + 1),
+                       false};
+          const CellBound bound =
+              boundCell(samples_[corners[k][0]], samples_[corners[k][1]], samples_[corners[k][2]],
+                        to_->mesh(), balls_, scale_, margin_, threshold);
+          child.upper = bound.upper;
+          wins += bound.face_won;
+        }
+      }
+      face_wins_ += wins;
+    });
+    counters_.triangles_refined += batch_.size();
+    counters_.cells += 4 * batch_.size();
+    for (uint32_t c = first_child; c < cells_.size(); ++c) pushOrDrop(c, threshold);
+  }
+
+  // Fills `out` (bounds, where, mean/RMS, per-vertex distances, counters).
+  void finish(OneSidedHausdorff& out) {
+    out.lower = std::max(lb_, 0.0);
+    out.upper = std::max(upper(), out.lower);
+    if (lb_sample_ != kInvalidIndex) {
+      const Sample& s = samples_[lb_sample_];
+      out.at = s.position;
+      out.at_triangle = s.source;
+      out.closest = s.closest;
+      out.closest_triangle = s.closest_triangle;
+    }
+    // Mean and RMS: the distance taken as linear over each final cell between its corners'
+    // exact distances, integrated exactly (int L = A (d0+d1+d2)/3,
+    // int L^2 = A (d0^2+d1^2+d2^2 + d0 d1 + d1 d2 + d2 d0) / 6).
+    double area = 0, sum = 0, sum2 = 0;
+    for (const Cell& cell : cells_) {
+      if (cell.split) continue;
+      const Sample& s0 = samples_[cell.corner[0]];
+      const Sample& s1 = samples_[cell.corner[1]];
+      const Sample& s2 = samples_[cell.corner[2]];
+      const double cell_area =
+          0.5 * (s1.position - s0.position).cross(s2.position - s0.position).norm();
+      const double d0 = s0.distance, d1 = s1.distance, d2 = s2.distance;
+      area += cell_area;
+      sum += cell_area * (d0 + d1 + d2) / 3;
+      sum2 += cell_area * (d0 * d0 + d1 * d1 + d2 * d2 + d0 * d1 + d1 * d2 + d2 * d0) / 6;
+    }
+    const size_t nv = from_.positions.size();
+    out.vertex_distance.assign(nv, kNaN);
+    for (VertexIndex v = 0; v < nv; ++v) out.vertex_distance[v] = samples_[v].distance;
+    if (area > 0) {
+      out.mean = sum / area;
+      out.rms = std::sqrt(sum2 / area);
+    } else {
+      double n = 0;
+      sum = sum2 = 0;
+      for (double d : out.vertex_distance) {
+        if (std::isnan(d)) continue;
+        n += 1;
+        sum += d;
+        sum2 += d * d;
+      }
+      out.mean = sum / n;
+      out.rms = std::sqrt(sum2 / n);
+    }
+    out.area = area;
+    out.counters = counters_;
+    out.counters.triangles_tested = triangles_tested_;
+    out.counters.face_bound_wins = face_wins_;
+  }
+
+ private:
+  const Mesh& from_;
+  std::shared_ptr<const Hierarchy> to_;
+  double scale_, margin_;
+  bool parallel_;
+  tbb::enumerable_thread_specific<QueryStream> streams_;
+  std::vector<TriangleBall> balls_;  // [triangle of B]
+
+  std::vector<Sample> samples_;  // [sample] vertices of A first (sample id = vertex index)
+  std::vector<Cell> cells_;      // [cell] triangles of A first (cell id = triangle index)
+  struct HeapEntry {
+    double upper;
+    uint32_t cell;
+  };
+  std::vector<HeapEntry> heap_;  // cells above the threshold, max-heap on upper
+  EdgeMap edges_;
+  double lb_ = -kInf;
+  uint32_t lb_sample_ = kInvalidIndex;
+  double dropped_upper_ = -kInf;  // highest bound of a final cell
+  bool converged_ = true;
+  HausdorffCounters counters_;
+  std::atomic<uint64_t> triangles_tested_{0};
+  std::atomic<uint64_t> face_wins_{0};
+  std::vector<uint32_t> batch_, mids_, new_ids_;  // per-round scratch
+  std::vector<std::pair<uint64_t, uint32_t>> order_;
+  Vec3 box_lower_ = Vec3::Zero(), box_extent_ = Vec3::Ones();  // A's bounds, for Morton codes
+
+  uint64_t mortonCode(const Vec3& x) const {
+    uint64_t code = 0;
+    for (int axis = 0; axis < 3; ++axis) {
+      const double t = (x[axis] - box_lower_[axis]) / box_extent_[axis];
+      code |= spreadBits(static_cast<uint64_t>(std::clamp(t, 0.0, 1.0) * 2097151.0)) << axis;
+    }
+    return code;
+  }
+
+  // Higher bound first; among equal bounds the lower cell id (deterministic).
+  static bool heapBefore(const HeapEntry& x, const HeapEntry& y) {
+    return x.upper != y.upper ? x.upper < y.upper : x.cell > y.cell;
+  }
+
+  void pushOrDrop(uint32_t c, double threshold) {
+    if (cells_[c].upper > threshold) {
+      heap_.push_back({cells_[c].upper, c});
+      std::push_heap(heap_.begin(), heap_.end(), heapBefore);
+    } else {
+      dropped_upper_ = std::max(dropped_upper_, cells_[c].upper);
+    }
+  }
+
+  // The one place a sample meets B: an exact fresh query (its answer depends on the point only,
+  // so on neither the thread nor the order). QueryStream::closestCoherent() would be the warm
+  // start (reset() the stream at each chunk start to keep answers thread-independent), but its
+  // candidate-set certificate does not pay here: Morton order jumps now and then, and each jump
+  // inflates the set's reach, so it measured several times slower than closest().
+  void querySample(QueryStream& stream, CoherentState& state, Sample& s) {
+    const ClosestPoint c = g_mode == 0 ? stream.closest(s.position) : stream.closestCoherent(s.position, state);
+    s.distance = c.distance;
+    s.closest = c.point;
+    s.closest_triangle = c.triangle;
+  }
+
+  void querySamples(const std::vector<uint32_t>& ids) {
+    forChunks(ids.size(), kQueryChunk, parallel_, [&](size_t begin, size_t end) {
+      QueryStream& stream = streams_.local();
+      uint64_t tested = 0;
+      CoherentState state;
+      state.reach_steps = g_reach;
+      for (size_t i = begin; i < end; ++i) {
+        querySample(stream, state, samples_[ids[i]]);
+        tested += stream.counters().triangles_tested;
+      }
+      triangles_tested_ += tested;
+    });
+    counters_.samples += ids.size();
+    counters_.queries += ids.size();
+  }
+};
+
+void addCounters(HausdorffCounters& sum, const HausdorffCounters& c) {
+  sum.samples += c.samples;
+  sum.queries += c.queries;
+  sum.triangles_tested += c.triangles_tested;
+  sum.triangles_refined += c.triangles_refined;
+  sum.cells += c.cells;
+  sum.face_bound_wins += c.face_bound_wins;
+  sum.rounds += c.rounds;
+}
+
+double effectiveTolerance(const HausdorffOptions& options, const Mesh& a) {
+  if (!(options.tolerance >= 0) || !std::isfinite(options.tolerance))
+    throw std::invalid_argument("hausdorff: tolerance must be finite and >= 0");
+  if (options.tolerance > 0) return options.tolerance;
+  if (!(options.relative_tolerance > 0) || !std::isfinite(options.relative_tolerance))
+    throw std::invalid_argument("hausdorff: relative tolerance must be finite and > 0");
+  const double tolerance = options.relative_tolerance * meshDiagonal(a);
+  if (!(tolerance > 0))
+    throw std::invalid_argument("hausdorff: " + a.name +
+                                " has zero extent; give an absolute tolerance");
+  return tolerance;
+}
+
+void checkOrThrow(const Mesh& mesh) {
+  const std::string problem = checkMesh(mesh);
+  if (!problem.empty()) throw MeshError(problem);
+}
+
+// The driver for both entry points; `a_hierarchy` null means one-sided.
+HausdorffResult run(const Mesh& a, const std::shared_ptr<const Hierarchy>& a_hierarchy,
+                    const std::shared_ptr<const Hierarchy>& b_hierarchy,
+                    const HausdorffOptions& options, Clock::time_point start,
+                    double build_seconds) {
+  const Mesh& b = b_hierarchy->mesh();
+  const bool symmetric = a_hierarchy != nullptr;
+  const double scale = std::max(largestCoordinate(a), largestCoordinate(b));
+  HausdorffResult result;
+  result.tolerance = std::max(effectiveTolerance(options, a), 4 * kMarginRelative * scale);
+  result.build_seconds = build_seconds;
+  const double tol = result.tolerance;
+  const bool parallel = options.threads != 1;
+
+  tbb::task_arena arena(options.threads == 0 ? tbb::task_arena::automatic
+                                             : static_cast<int>(options.threads));
+  arena.execute([&] {
+    Direction ab(a, b_hierarchy, scale, parallel);
+    std::unique_ptr<Direction> ba;
+    if (symmetric) ba = std::make_unique<Direction>(b, a_hierarchy, scale, parallel);
+    auto report = [&] {
+      if (!options.progress) return;
+      HausdorffProgress p;
+      p.lower = std::max({ab.lower(), ba ? ba->lower() : -kInf, 0.0});
+      p.upper = std::max(ab.upper(), ba ? ba->upper() : -kInf);
+      p.tolerance = tol;
+      p.samples = ab.samples() + (ba ? ba->samples() : 0);
+      p.seconds = secondsSince(start);
+      options.progress(p);
+    };
+    // A direction's cells are final once within tol of the larger LB of both directions
+    // (tighten_both: of its own LB).
+    const bool joint = ba && !options.tighten_both;
+    ab.sampleVertices();
+    if (ba) ba->sampleVertices();
+    ab.boundTriangles(joint ? ba->lower() : -kInf, tol);
+    if (ba) ba->boundTriangles(joint ? ab.lower() : -kInf, tol);
+    report();
+    while (true) {
+      const double floor_ab = joint ? ba->lower() : -kInf;
+      const double floor_ba = joint ? ab.lower() : -kInf;
+      const double excess_ab = ab.topUpper() - (std::max(ab.lower(), floor_ab) + tol);
+      const double excess_ba =
+          ba ? ba->topUpper() - (std::max(ba->lower(), floor_ba) + tol) : -kInf;
+      if (!(excess_ab > 0) && !(excess_ba > 0)) break;
+      // Refine the direction with the larger bound (tighten_both: the larger excess).
+      const bool pick_ba =
+          ba && excess_ba > 0 &&
+          (!(excess_ab > 0) ||
+           (options.tighten_both ? excess_ba > excess_ab : ba->topUpper() > ab.topUpper()));
+      if (pick_ba)
+        ba->refine(floor_ba, tol);
+      else
+        ab.refine(floor_ab, tol);
+      report();
+    }
+    ab.finish(result.a_to_b);
+    addCounters(result.counters, result.a_to_b.counters);
+    result.converged = ab.converged();
+    if (ba) {
+      ba->finish(result.b_to_a);
+      addCounters(result.counters, result.b_to_a.counters);
+      result.converged = result.converged && ba->converged();
+      result.lower = std::max(result.a_to_b.lower, result.b_to_a.lower);
+      result.upper = std::max(result.a_to_b.upper, result.b_to_a.upper);
+    } else {
+      result.b_to_a.lower = result.b_to_a.upper = kNaN;
+      result.b_to_a.mean = result.b_to_a.rms = kNaN;
+      result.lower = result.a_to_b.lower;
+      result.upper = result.a_to_b.upper;
+    }
+  });
+  result.converged = result.converged && result.upper - result.lower <= tol;
+  result.seconds = secondsSince(start);
+  return result;
+}
+
+}  // namespace
+
+HausdorffResult hausdorff(const std::shared_ptr<const Hierarchy>& a,
+                          const std::shared_ptr<const Hierarchy>& b,
+                          const HausdorffOptions& options) {
+  return run(a->mesh(), a, b, options, Clock::now(), 0);
+}
+
+HausdorffResult hausdorff(const Mesh& a, const Mesh& b, const HausdorffOptions& options) {
+  const auto start = Clock::now();
+  checkOrThrow(a);
+  checkOrThrow(b);
+  effectiveTolerance(options, a);  // fail before building
+  std::shared_ptr<const Hierarchy> ha, hb;
+  tbb::task_arena arena(options.threads == 0 ? tbb::task_arena::automatic
+                                             : static_cast<int>(options.threads));
+  arena.execute([&] {
+    tbb::parallel_invoke([&] { ha = Hierarchy::build(a); }, [&] { hb = Hierarchy::build(b); });
+  });
+  return run(ha->mesh(), ha, hb, options, start, secondsSince(start));
+}
+
+HausdorffResult hausdorffOneSided(const Mesh& a, const std::shared_ptr<const Hierarchy>& b,
+                                  const HausdorffOptions& options) {
+  checkOrThrow(a);
+  return run(a, nullptr, b, options, Clock::now(), 0);
+}
+
+HausdorffResult hausdorffOneSided(const Mesh& a, const Mesh& b, const HausdorffOptions& options) {
+  const auto start = Clock::now();
+  checkOrThrow(a);
+  checkOrThrow(b);
+  effectiveTolerance(options, a);
+  const std::shared_ptr<const Hierarchy> hb = Hierarchy::build(b);
+  return run(a, nullptr, hb, options, start, secondsSince(start));
+}
+
+}  // namespace meshsweeper

@@ -1,0 +1,417 @@
+// Hausdorff distances (core/hausdorff.h) against known answers and against brute force.
+//
+// Known answers:
+//  - two concentric geodesic spheres built from the same icosahedron, radii r < R (the outer
+//    one is the inner one scaled by R/r; both convex, the outer contains the inner):
+//      h(outer, inner) = R - r exactly: the distance to a convex set is convex, so over a face
+//        of the outer mesh it peaks at a corner, and a corner (R/r) v lies on the ray through
+//        the inner vertex v, whose normal cone holds that ray (the inner mesh is inscribed in
+//        the sphere of radius r, so the tangent plane at v supports it);
+//      h(inner, outer) = max over x of the inner mesh of min over faces F of the outer mesh of
+//        (R/r h_F - n_F . x), h_F the distance of face F's plane (of the inner mesh) from the
+//        centre; it lies in [(R/r - 1) min_F h_F, (R/r - 1) max_F h_F] (each term is at least
+//        (R/r - 1) h_F since n_F . x <= h_F; the term of x's own face is (R/r - 1) h_t), which
+//        is one number for the icosahedron (every face at the inradius: the distance is that
+//        constant over the whole inner surface);
+//  - a square grid and the same grid with its centre vertex raised by z: h(raised, flat) = z
+//    (the distance to the plane is the height, largest at the raised vertex, and the mean and
+//    RMS are exact: the height is linear on each triangle);
+//  - identical meshes: 0; a square translated along its normal by t: t both ways.
+// Brute force (core/brute_force.h): on procedural and real meshes, the brute-force distance of
+// every vertex and of dense random surface samples of A is <= upper, the distance at the
+// reported point equals lower, lower <= upper, and upper - lower <= tolerance.
+// Determinism: 1 and 2 threads give bit-identical results.
+#include "core/hausdorff.h"
+
+#include "core/brute_force.h"
+#include "core/mesh_io.h"
+#include "scenes/procedural.h"
+
+#include <catch2/catch.hpp>
+
+#include <algorithm>
+#include <cmath>
+#include <filesystem>
+#include <map>
+#include <stdexcept>
+#include <string>
+#include <tuple>
+
+using namespace meshsweeper;
+
+namespace {
+
+// The inradius over the circumradius of a regular icosahedron.
+const double kIcosahedronInradius =
+    std::sqrt(3.0) * (3 + std::sqrt(5.0)) / (3 * std::sqrt(10 + 2 * std::sqrt(5.0)));
+
+Mesh translated(Mesh mesh, const Vec3& offset) {
+  for (Vec3& p : mesh.positions) p += offset;
+  return mesh;
+}
+
+// Largest and smallest distance from the origin to the planes of the faces.
+std::pair<double, double> facePlaneDistances(const Mesh& mesh) {
+  double lo = INFINITY, hi = 0;
+  for (const Triangle& t : mesh.triangles) {
+    const Vec3 a = mesh.positions[t[0]], b = mesh.positions[t[1]], c = mesh.positions[t[2]];
+    const Vec3 n = (b - a).cross(c - a).normalized();
+    const double h = std::abs(n.dot(a));
+    lo = std::min(lo, h);
+    hi = std::max(hi, h);
+  }
+  return {lo, hi};
+}
+
+// A coarse version of a mesh by vertex clustering on a grid of `cell` (each vertex moves to the
+// first vertex of its cell, so every coarse vertex lies on the original surface); triangles
+// that collapse are dropped. Non-manifold results are valid input.
+Mesh clustered(const Mesh& mesh, double cell) {
+  std::map<std::tuple<long, long, long>, VertexIndex> representative;
+  std::vector<VertexIndex> map(mesh.positions.size());
+  Mesh out;
+  out.name = mesh.name + " clustered";
+  for (VertexIndex v = 0; v < mesh.positions.size(); ++v) {
+    const Vec3& p = mesh.positions[v];
+    const auto key = std::make_tuple(std::lround(std::floor(p.x() / cell)),
+                                     std::lround(std::floor(p.y() / cell)),
+                                     std::lround(std::floor(p.z() / cell)));
+    const auto found = representative.find(key);
+    if (found != representative.end()) {
+      map[v] = found->second;
+    } else {
+      map[v] = static_cast<VertexIndex>(out.positions.size());
+      representative.emplace(key, map[v]);
+      out.positions.push_back(p);
+    }
+  }
+  for (const Triangle& t : mesh.triangles) {
+    const Triangle c{map[t[0]], map[t[1]], map[t[2]]};
+    if (c[0] != c[1] && c[1] != c[2] && c[2] != c[0]) out.triangles.push_back(c);
+  }
+  return out;
+}
+
+double bruteDistance(const Mesh& mesh, const Vec3& p) {
+  return bruteForceClosest(mesh, p).distance;
+}
+
+// Checks one direction against brute force: every vertex and `samples` random surface points
+// of `from` are within `upper` of `to`, and the reported point is at distance `lower`.
+void checkAgainstBruteForce(const OneSidedHausdorff& h, const Mesh& from, const Mesh& to,
+                            size_t samples, uint64_t seed) {
+  REQUIRE(h.lower <= h.upper);
+  const double slack = 1e-12 * (1 + h.upper);
+  double vertex_max = 0;
+  for (const Vec3& p : scenes::vertexPoints(from))
+    vertex_max = std::max(vertex_max, bruteDistance(to, p));
+  CHECK(vertex_max <= h.upper + slack);
+  double sample_max = 0;
+  for (const Vec3& p : scenes::surfacePoints(from, samples, seed))
+    sample_max = std::max(sample_max, bruteDistance(to, p));
+  CHECK(sample_max <= h.upper + slack);
+  // lower is the exact distance of a point of A, reached at `at`, on triangle at_triangle.
+  REQUIRE(h.at_triangle < from.triangles.size());
+  const Triangle& t = from.triangles[h.at_triangle];
+  CHECK(
+      closestPointOnTriangle(h.at, from.positions[t[0]], from.positions[t[1]], from.positions[t[2]])
+          .squared_distance <= 1e-24 * (1 + h.at.squaredNorm()));
+  CHECK(std::abs(bruteDistance(to, h.at) - h.lower) <= slack);
+  CHECK(std::abs((h.at - h.closest).norm() - h.lower) <= slack);
+  REQUIRE(h.closest_triangle < to.triangles.size());
+  // The brute-force maximum over the vertices never exceeds the certified upper bound, and
+  // lower is at least the vertex maximum (every vertex is sampled).
+  CHECK(h.lower >= vertex_max - slack);
+}
+
+HausdorffOptions absolute(double tolerance, unsigned threads = 0) {
+  HausdorffOptions options;
+  options.tolerance = tolerance;
+  options.threads = threads;
+  return options;
+}
+
+void requireIdentical(const OneSidedHausdorff& x, const OneSidedHausdorff& y) {
+  CHECK(x.lower == y.lower);
+  CHECK(x.upper == y.upper);
+  CHECK(x.at == y.at);
+  CHECK(x.at_triangle == y.at_triangle);
+  CHECK(x.closest == y.closest);
+  CHECK(x.closest_triangle == y.closest_triangle);
+  CHECK(x.mean == y.mean);
+  CHECK(x.rms == y.rms);
+  CHECK(x.counters.samples == y.counters.samples);
+  CHECK(x.counters.triangles_refined == y.counters.triangles_refined);
+  CHECK(x.counters.cells == y.counters.cells);
+  CHECK(x.counters.rounds == y.counters.rounds);
+}
+
+}  // namespace
+
+// Points of B as degenerate triangles (i, i, i).
+Mesh pointCloud(const std::vector<Vec3>& points) {
+  Mesh mesh;
+  mesh.name = "points";
+  mesh.positions = points;
+  for (VertexIndex i = 0; i < points.size(); ++i) mesh.triangles.push_back({i, i, i});
+  return mesh;
+}
+
+Mesh singleTriangle(const Vec3& a, const Vec3& b, const Vec3& c) {
+  Mesh mesh;
+  mesh.name = "triangle";
+  mesh.positions = {a, b, c};
+  mesh.triangles = {{0, 1, 2}};
+  return mesh;
+}
+
+// Hand-drawn cases where the maximum of the bisector bound sits where only one kind of
+// candidate finds it. The tolerance is chosen so that a bound that missed the candidate would
+// stop at once with an upper bound below the true value.
+TEST_CASE("bisector bound: the triple point and an edge crossing set the maximum") {
+  const double h = 0.1;
+  SECTION("triple point: equilateral triangle, B = the three points above its corners") {
+    //        v2                  B: c_i = v_i + (0, 0, h)
+    //       /  \                 the farthest point of t from {c_i} is the centre,
+    //      / x  \                at sqrt(h^2 + 1/3) (circumradius 1/sqrt(3));
+    //    v0 ---- v1              an edge midpoint is only at sqrt(h^2 + 1/4)
+    const Vec3 v0(0, 0, 0), v1(1, 0, 0), v2(0.5, std::sqrt(0.75), 0);
+    const Mesh a = singleTriangle(v0, v1, v2);
+    const Mesh b = pointCloud({v0 + Vec3(0, 0, h), v1 + Vec3(0, 0, h), v2 + Vec3(0, 0, h)});
+    const double exact = std::sqrt(h * h + 1.0 / 3);
+    const HausdorffResult r = hausdorffOneSided(a, b, absolute(0.45));
+    CHECK(r.lower <= exact + 1e-12);
+    CHECK(r.upper >= exact - 1e-12);
+    CHECK(r.upper - r.lower <= 0.45);
+    const HausdorffResult tight = hausdorffOneSided(a, b, absolute(1e-6));
+    CHECK(tight.lower == Approx(exact).epsilon(1e-6));
+  }
+  SECTION("edge crossing: B = points above two corners") {
+    //   v2 (0.2, 0.5)            B: c0 above v0, c1 above v1 (height h)
+    //    |  \                    bisector x = 0.5 crosses edge v1-v2 at (0.5, 0.3125):
+    //    |    x                  the maximum, sqrt(h^2 + 0.25 + 0.3125^2); the corner v2
+    //   v0 ------ v1 (1, 0)      is only at sqrt(h^2 + 0.04 + 0.25)
+    const Vec3 v0(0, 0, 0), v1(1, 0, 0), v2(0.2, 0.5, 0);
+    const Mesh a = singleTriangle(v0, v1, v2);
+    const Mesh b = pointCloud({v0 + Vec3(0, 0, h), v1 + Vec3(0, 0, h)});
+    const double exact = std::sqrt(h * h + 0.25 + 0.3125 * 0.3125);
+    const HausdorffResult r = hausdorffOneSided(a, b, absolute(0.02));
+    CHECK(r.lower <= exact + 1e-12);
+    CHECK(r.upper >= exact - 1e-12);
+    CHECK(r.upper - r.lower <= 0.02);
+    const HausdorffResult tight = hausdorffOneSided(a, b, absolute(1e-6));
+    CHECK(tight.lower == Approx(exact).epsilon(1e-6));
+  }
+}
+
+TEST_CASE("concentric icosahedra: both one-sided distances exactly") {
+  const double r = 1, R = 2;
+  const Mesh inner = scenes::icosphere(0, r);
+  const Mesh outer = scenes::icosphere(0, R);
+  const double tol = 1e-6;
+  const HausdorffResult result = hausdorff(inner, outer, absolute(tol));
+  INFO("h(inner, outer) [" << result.a_to_b.lower << ", " << result.a_to_b.upper
+                           << "], h(outer, inner) [" << result.b_to_a.lower << ", "
+                           << result.b_to_a.upper << "]");
+  // H = R - r from the outer mesh's vertices.
+  CHECK(result.lower <= R - r + 1e-12);
+  CHECK(result.upper >= R - r - 1e-12);
+  CHECK(result.upper - result.lower <= tol);
+  CHECK(result.converged);
+
+  // Each direction to the tolerance.
+  HausdorffOptions both = absolute(tol);
+  both.tighten_both = true;
+  const HausdorffResult tight = hausdorff(inner, outer, both);
+  const double expected = (R / r - 1) * kIcosahedronInradius * r;
+  const auto planes = facePlaneDistances(inner);
+  CHECK(planes.first == Approx(kIcosahedronInradius).epsilon(1e-12));
+  CHECK(planes.second == Approx(kIcosahedronInradius).epsilon(1e-12));
+  CHECK(tight.a_to_b.lower <= expected + 1e-12);
+  CHECK(tight.a_to_b.upper >= expected - 1e-12);
+  CHECK(tight.a_to_b.upper - tight.a_to_b.lower <= tol);
+  CHECK(tight.b_to_a.lower <= R - r + 1e-12);
+  CHECK(tight.b_to_a.upper >= R - r - 1e-12);
+  CHECK(tight.b_to_a.upper - tight.b_to_a.lower <= tol);
+  CHECK(tight.lower == result.lower);
+}
+
+TEST_CASE("concentric geodesic spheres: known intervals and brute force") {
+  const double r = 1, R = 1.25;
+  const Mesh inner = scenes::icosphere(2, r);
+  const Mesh outer = scenes::icosphere(2, R);
+  const auto planes = facePlaneDistances(inner);
+  REQUIRE(R / r * planes.first > r);  // the outer mesh contains the inner one
+  HausdorffOptions options = absolute(1e-5);
+  options.tighten_both = true;
+  const HausdorffResult result = hausdorff(inner, outer, options);
+  CHECK(result.b_to_a.lower <= R - r + 1e-12);
+  CHECK(result.b_to_a.upper >= R - r - 1e-12);
+  CHECK(result.a_to_b.upper >= (R / r - 1) * planes.first - 1e-12);
+  CHECK(result.a_to_b.lower <= (R / r - 1) * planes.second + 1e-12);
+  CHECK(result.a_to_b.upper - result.a_to_b.lower <= 1e-5);
+  CHECK(result.b_to_a.upper - result.b_to_a.lower <= 1e-5);
+  checkAgainstBruteForce(result.a_to_b, inner, outer, 3000, 1);
+  checkAgainstBruteForce(result.b_to_a, outer, inner, 3000, 2);
+}
+
+TEST_CASE("grid with a raised vertex: h(raised, flat) is the height, mean and RMS exact") {
+  const int n = 8;
+  const double height = 0.1;
+  const Mesh flat = scenes::gridPlane(n, 1.0);
+  Mesh raised = flat;
+  const VertexIndex centre = (n / 2) * (n + 1) + n / 2;
+  raised.positions[centre].z() = height;
+
+  const double tol = 1e-5;
+  HausdorffOptions options = absolute(tol);
+  options.tighten_both = true;
+  const HausdorffResult result = hausdorff(raised, flat, options);
+  CHECK(result.a_to_b.lower == Approx(height).margin(1e-15));
+  CHECK(result.a_to_b.upper >= height);
+  CHECK(result.a_to_b.upper <= height + tol);
+  CHECK((result.a_to_b.at - raised.positions[centre]).norm() == Approx(0).margin(1e-15));
+  CHECK(
+      (result.a_to_b.closest - Vec3(raised.positions[centre].x(), raised.positions[centre].y(), 0))
+          .norm() == Approx(0).margin(1e-15));
+  CHECK(result.lower == Approx(height).margin(1e-15));
+  CHECK(result.upper - result.lower <= tol);
+
+  // The height is linear on each triangle of the raised grid: mean and RMS are exact.
+  double area = 0, sum = 0, sum2 = 0;
+  for (const Triangle& t : raised.triangles) {
+    const Vec3 a = raised.positions[t[0]], b = raised.positions[t[1]], c = raised.positions[t[2]];
+    const double w = 0.5 * (b - a).cross(c - a).norm();
+    const double z0 = a.z(), z1 = b.z(), z2 = c.z();
+    area += w;
+    sum += w * (z0 + z1 + z2) / 3;
+    sum2 += w * (z0 * z0 + z1 * z1 + z2 * z2 + z0 * z1 + z1 * z2 + z2 * z0) / 6;
+  }
+  CHECK(result.a_to_b.mean == Approx(sum / area).epsilon(1e-12));
+  CHECK(result.a_to_b.rms == Approx(std::sqrt(sum2 / area)).epsilon(1e-12));
+  CHECK(result.a_to_b.area == Approx(area).epsilon(1e-12));
+
+  // The flat grid's distance to the tent is below the height, and brute force agrees.
+  CHECK(result.b_to_a.upper < height);
+  checkAgainstBruteForce(result.a_to_b, raised, flat, 2000, 3);
+  checkAgainstBruteForce(result.b_to_a, flat, raised, 2000, 4);
+
+  // One-sided entry point: the same interval up to the tolerance.
+  const HausdorffResult one = hausdorffOneSided(raised, flat, absolute(tol));
+  CHECK(one.lower == Approx(height).margin(1e-15));
+  CHECK(one.upper - one.lower <= tol);
+  CHECK(std::isnan(one.b_to_a.lower));
+}
+
+TEST_CASE("identical meshes: zero") {
+  for (const Mesh& mesh :
+       {scenes::icosphere(3), scenes::torus(1, 0.3, 24, 12), scenes::gridPlane(5)}) {
+    INFO(mesh.name);
+    const HausdorffResult result = hausdorff(mesh, mesh, HausdorffOptions{});
+    CHECK(result.lower == Approx(0).margin(1e-15));
+    CHECK(result.upper <= result.tolerance);
+    CHECK(result.a_to_b.mean == Approx(0).margin(1e-15));
+  }
+}
+
+TEST_CASE("a square translated along its normal: the translation both ways") {
+  const Mesh square = scenes::gridPlane(6, 2.0);
+  const double t = 0.37;
+  const Mesh moved = translated(square, Vec3(0, 0, t));
+  HausdorffOptions options = absolute(1e-6);
+  options.tighten_both = true;
+  const HausdorffResult result = hausdorff(square, moved, options);
+  for (const OneSidedHausdorff* h : {&result.a_to_b, &result.b_to_a}) {
+    CHECK(h->lower == Approx(t).epsilon(1e-14));
+    CHECK(h->upper >= t);
+    CHECK(h->upper <= t + 1e-6);
+    CHECK(h->mean == Approx(t).epsilon(1e-12));
+    CHECK(h->rms == Approx(t).epsilon(1e-12));
+  }
+}
+
+TEST_CASE("relative tolerance, degenerate triangles and several components") {
+  const Mesh a = scenes::concatenate({scenes::icosphere(2), scenes::degenerateMesh()});
+  const Mesh b = scenes::concatenate({translated(scenes::icosphere(1, 1.1), Vec3(0.05, 0, 0)),
+                                      translated(scenes::torus(0.5, 0.1, 12, 6), Vec3(-3, -3, 0))});
+  HausdorffOptions options;
+  options.relative_tolerance = 1e-3;
+  const HausdorffResult result = hausdorff(a, b, options);
+  CHECK(result.tolerance == Approx(1e-3 * meshDiagonal(a)));
+  CHECK(result.upper - result.lower <= result.tolerance);
+  CHECK(result.converged);
+  checkAgainstBruteForce(result.a_to_b, a, b, 2000, 5);
+  checkAgainstBruteForce(result.b_to_a, b, a, 2000, 6);
+  // vertex_distance: brute force for used vertices, NaN for the isolated one (degenerateMesh's
+  // vertex 11, shifted by the icosphere's vertices).
+  const size_t isolated = scenes::icosphere(2).positions.size() + 11;
+  REQUIRE(result.a_to_b.vertex_distance.size() == a.positions.size());
+  CHECK(std::isnan(result.a_to_b.vertex_distance[isolated]));
+  for (VertexIndex v = 0; v < a.positions.size(); v += 7) {
+    if (v == isolated) continue;
+    CHECK(result.a_to_b.vertex_distance[v] ==
+          Approx(bruteDistance(b, a.positions[v])).margin(1e-14));
+  }
+}
+
+TEST_CASE("1 and 2 threads give identical results") {
+  const Mesh a = scenes::icosphere(3, 1.0);
+  const Mesh b = translated(scenes::torus(0.8, 0.35, 30, 14), Vec3(0.1, 0.05, 0));
+  const HausdorffResult one = hausdorff(a, b, absolute(1e-4, 1));
+  const HausdorffResult two = hausdorff(a, b, absolute(1e-4, 2));
+  REQUIRE(one.counters.triangles_refined > 0);
+  requireIdentical(one.a_to_b, two.a_to_b);
+  requireIdentical(one.b_to_a, two.b_to_a);
+  CHECK(one.lower == two.lower);
+  CHECK(one.upper == two.upper);
+}
+
+TEST_CASE("bad input: clear errors") {
+  Mesh empty;
+  empty.name = "empty";
+  const Mesh sphere = scenes::icosphere(1);
+  CHECK_THROWS_AS(hausdorff(empty, sphere), MeshError);
+  CHECK_THROWS_AS(hausdorff(sphere, empty), MeshError);
+  Mesh bad = sphere;
+  bad.triangles[0][1] = 100000;
+  CHECK_THROWS_AS(hausdorff(sphere, bad), MeshError);
+  HausdorffOptions negative;
+  negative.tolerance = -1;
+  CHECK_THROWS_AS(hausdorff(sphere, sphere, negative), std::invalid_argument);
+  HausdorffOptions nan_relative;
+  nan_relative.relative_tolerance = NAN;
+  CHECK_THROWS_AS(hausdorff(sphere, sphere, nan_relative), std::invalid_argument);
+  // A mesh of zero extent needs an absolute tolerance.
+  Mesh point;
+  point.positions = {Vec3(1, 1, 1)};
+  point.triangles = {Triangle{0, 0, 0}};
+  CHECK_THROWS_AS(hausdorff(point, sphere), std::invalid_argument);
+  const HausdorffResult r = hausdorff(point, sphere, absolute(1e-6));
+  CHECK(r.a_to_b.lower == Approx(bruteDistance(sphere, Vec3(1, 1, 1))).epsilon(1e-14));
+}
+
+TEST_CASE("real mesh against a coarse version: brute force inside the bounds") {
+  const std::string path = scenes::meshPath("mannequin-devil");
+  if (!std::filesystem::exists(path)) {
+    WARN("real mesh missing: " << path << " (run scripts/fetch_data.sh)");
+    return;
+  }
+  const Mesh fine = readMesh(path);
+  const Mesh coarse = clustered(fine, 0.03 * meshDiagonal(fine));
+  INFO(fine.triangles.size() << " against " << coarse.triangles.size() << " triangles");
+  REQUIRE(coarse.triangles.size() > 500);
+  REQUIRE(coarse.triangles.size() < fine.triangles.size() / 4);
+  HausdorffOptions options;
+  options.relative_tolerance = 4e-4;
+  options.threads = 1;
+  const HausdorffResult result = hausdorff(fine, coarse, options);
+  CHECK(result.upper - result.lower <= result.tolerance);
+  CHECK(result.tolerance == Approx(4e-4 * meshDiagonal(fine)));
+  checkAgainstBruteForce(result.a_to_b, fine, coarse, 1500, 7);
+  checkAgainstBruteForce(result.b_to_a, coarse, fine, 1500, 8);
+
+  options.threads = 2;
+  const HausdorffResult two = hausdorff(fine, coarse, options);
+  requireIdentical(result.a_to_b, two.a_to_b);
+  requireIdentical(result.b_to_a, two.b_to_a);
+}

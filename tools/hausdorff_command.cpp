@@ -1,0 +1,246 @@
+// meshsweep hausdorff: certified Hausdorff distance between two meshes (core/hausdorff.h), with
+// a Metro-like summary, optional JSON and a per-vertex colour map of A.
+#include "core/hausdorff.h"
+#include "core/mesh_io.h"
+#include "tools/commands.h"
+
+#include <Eigen/Geometry>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <limits>
+#include <memory>
+#include <string>
+
+#include <unistd.h>
+
+namespace meshsweeper::cli {
+
+const char kHausdorffHelp[] =
+    "Usage: meshsweep hausdorff A B [--tolerance T | --relative R] [--json FILE]\n"
+    "                           [--colors FILE.ply] [--threads N] [--both]\n"
+    "\n"
+    "Certified Hausdorff distance between meshes A and B (OFF, OBJ, PLY or STL), over every\n"
+    "point of both surfaces, not only the vertices:\n"
+    "  h(A,B) = max over points a of A of the distance from a to B   (A -> B)\n"
+    "  H(A,B) = max(h(A,B), h(B,A))\n"
+    "Each is reported as [lower, upper]: lower is the exact distance of a point of A (printed,\n"
+    "with its closest point on B), upper is proven for every point; the computation stops once\n"
+    "upper - lower <= the tolerance for H. Mean and RMS are area-weighted estimates (not\n"
+    "certified). Percentages are of A's bounding-box diagonal.\n"
+    "\n"
+    "Options:\n"
+    "  --tolerance T    absolute tolerance (mesh units, > 0)\n"
+    "  --relative R     tolerance as a fraction of A's bounding-box diagonal (> 0);\n"
+    "                   the default is --relative 1e-4\n"
+    "  --both           refine both directions to the tolerance (by default the direction that\n"
+    "                   cannot change H stops as soon as that is proven, so its interval may be\n"
+    "                   wider)\n"
+    "  --threads N      worker threads, 0 = all (default); results do not depend on N\n"
+    "  --json FILE      write the result as JSON to FILE ('-': standard output, the summary then\n"
+    "                   goes to standard error)\n"
+    "  --colors FILE    write A as an ASCII PLY with per-vertex 'quality' (distance to B) and\n"
+    "                   red/green/blue on a blue (0) to red (largest vertex distance) ramp\n"
+    "\n"
+    "JSON keys: a, b {path, vertices, triangles, diagonal, area}; a_to_b, b_to_a {lower, upper,\n"
+    "at [x,y,z], at_triangle, closest [x,y,z], closest_triangle, mean, rms, samples, queries,\n"
+    "triangles_refined, cells}; hausdorff {lower, upper}; tolerance; converged; threads;\n"
+    "seconds; build_seconds; samples; queries; triangles_refined.\n"
+    "\n"
+    "Exit status: 0 success, 1 unreadable/invalid/empty mesh or unwritable output,\n"
+    "2 bad command line.\n";
+
+namespace {
+
+double percent(double value, double diagonal) { return diagonal > 0 ? 100 * value / diagonal : 0; }
+
+double surfaceArea(const Mesh& mesh) {
+  double area = 0;
+  for (const Triangle& t : mesh.triangles) {
+    const Vec3& a = mesh.positions[t[0]];
+    area += 0.5 * (mesh.positions[t[1]] - a).cross(mesh.positions[t[2]] - a).norm();
+  }
+  return area;
+}
+
+std::string jsonNumber(double x) {
+  if (!std::isfinite(x)) return "null";
+  char text[32];
+  std::snprintf(text, sizeof text, "%.17g", x);
+  return text;
+}
+
+std::string jsonPoint(const Vec3& p) {
+  return "[" + jsonNumber(p.x()) + ", " + jsonNumber(p.y()) + ", " + jsonNumber(p.z()) + "]";
+}
+
+std::string jsonMesh(const std::string& path, const Mesh& mesh) {
+  return "{\"path\": " + jsonString(path) +
+         ", \"vertices\": " + std::to_string(mesh.positions.size()) +
+         ", \"triangles\": " + std::to_string(mesh.triangles.size()) +
+         ", \"diagonal\": " + jsonNumber(meshDiagonal(mesh)) +
+         ", \"area\": " + jsonNumber(surfaceArea(mesh)) + "}";
+}
+
+std::string jsonOneSided(const OneSidedHausdorff& h) {
+  return "{\"lower\": " + jsonNumber(h.lower) + ", \"upper\": " + jsonNumber(h.upper) +
+         ", \"at\": " + jsonPoint(h.at) + ", \"at_triangle\": " + std::to_string(h.at_triangle) +
+         ", \"closest\": " + jsonPoint(h.closest) +
+         ", \"closest_triangle\": " + std::to_string(h.closest_triangle) +
+         ", \"mean\": " + jsonNumber(h.mean) + ", \"rms\": " + jsonNumber(h.rms) +
+         ", \"samples\": " + std::to_string(h.counters.samples) +
+         ", \"queries\": " + std::to_string(h.counters.queries) +
+         ", \"triangles_refined\": " + std::to_string(h.counters.triangles_refined) +
+         ", \"cells\": " + std::to_string(h.counters.cells) + "}";
+}
+
+// Blue (t = 0) -> cyan -> green -> yellow -> red (t = 1).
+void ramp(double t, int rgb[3]) {
+  t = std::clamp(std::isfinite(t) ? t : 0.0, 0.0, 1.0);
+  const double r = std::clamp(4 * t - 2, 0.0, 1.0);
+  const double g = t < 0.25 ? 4 * t : t > 0.75 ? 4 - 4 * t : 1.0;
+  const double b = std::clamp(2 - 4 * t, 0.0, 1.0);
+  rgb[0] = static_cast<int>(std::lround(255 * r));
+  rgb[1] = static_cast<int>(std::lround(255 * g));
+  rgb[2] = static_cast<int>(std::lround(255 * b));
+}
+
+void writeColors(Output& out, const Mesh& mesh, const std::vector<double>& distance) {
+  double largest = 0;
+  for (double d : distance)
+    if (std::isfinite(d)) largest = std::max(largest, d);
+  out.printf("ply\nformat ascii 1.0\ncomment meshsweep hausdorff: quality = distance to B\n");
+  out.printf("element vertex %zu\n", mesh.positions.size());
+  out.printf("property float x\nproperty float y\nproperty float z\nproperty float quality\n");
+  out.printf("property uchar red\nproperty uchar green\nproperty uchar blue\n");
+  out.printf("element face %zu\nproperty list uchar int vertex_indices\nend_header\n",
+             mesh.triangles.size());
+  for (size_t v = 0; v < mesh.positions.size(); ++v) {
+    const double d = std::isfinite(distance[v]) ? distance[v] : 0.0;  // unused vertices: 0
+    int rgb[3];
+    ramp(largest > 0 ? d / largest : 0.0, rgb);
+    const Vec3& p = mesh.positions[v];
+    out.printf("%.9g %.9g %.9g %.9g %d %d %d\n", p.x(), p.y(), p.z(), d, rgb[0], rgb[1], rgb[2]);
+  }
+  for (const Triangle& t : mesh.triangles) out.printf("3 %u %u %u\n", t[0], t[1], t[2]);
+  out.close();
+}
+
+// One direction of the summary.
+void printDirection(std::FILE* s, const char* name, const OneSidedHausdorff& h, double diagonal,
+                    double tolerance, const char* from, const char* to) {
+  std::fprintf(s, "  %s  max in [%.7g, %.7g]  (%.5f%% .. %.5f%% of diagonal)\n", name, h.lower,
+               h.upper, percent(h.lower, diagonal), percent(h.upper, diagonal));
+  std::fprintf(s, "          mean %.7g  RMS %.7g  (%.5f%%, %.5f%%; estimates)\n", h.mean, h.rms,
+               percent(h.mean, diagonal), percent(h.rms, diagonal));
+  std::fprintf(s, "          lower bound at (%.9g, %.9g, %.9g) on %s triangle %u,\n", h.at.x(),
+               h.at.y(), h.at.z(), from, h.at_triangle);
+  std::fprintf(s, "          closest point (%.9g, %.9g, %.9g) on %s triangle %u\n", h.closest.x(),
+               h.closest.y(), h.closest.z(), to, h.closest_triangle);
+  if (h.upper - h.lower > tolerance)
+    std::fprintf(s,
+                 "          (refined only until it could not change H; use --both to tighten)\n");
+  std::fprintf(s, "          %llu samples, %llu triangles refined\n",
+               static_cast<unsigned long long>(h.counters.samples),
+               static_cast<unsigned long long>(h.counters.triangles_refined));
+}
+
+}  // namespace
+
+int runHausdorff(int argc, char** argv, int first) {
+  const Args args("hausdorff", argc, argv, first,
+                  {{"--tolerance", true},
+                   {"--relative", true},
+                   {"--json", true},
+                   {"--colors", true},
+                   {"--threads", true},
+                   {"--both", false}});
+  args.expectPositional({"A", "B"});
+  const std::string& a_path = args.positional()[0];
+  const std::string& b_path = args.positional()[1];
+
+  HausdorffOptions options;
+  if (args.has("--tolerance") && args.has("--relative"))
+    throw UsageError("hausdorff: --tolerance and --relative cannot be combined");
+  if (args.has("--tolerance")) {
+    options.tolerance = args.nonNegativeDouble("--tolerance");
+    if (!(options.tolerance > 0)) throw UsageError("hausdorff: --tolerance must be > 0");
+  }
+  if (args.has("--relative")) {
+    options.relative_tolerance = args.nonNegativeDouble("--relative");
+    if (!(options.relative_tolerance > 0)) throw UsageError("hausdorff: --relative must be > 0");
+  }
+  if (args.has("--threads"))
+    options.threads = static_cast<unsigned>(args.integer("--threads", 0, 4096));
+  options.tighten_both = args.has("--both");
+  const bool json_to_stdout =
+      args.has("--json") && (args.value("--json") == "-" || args.value("--json").empty());
+
+  const Mesh a = readMesh(a_path);
+  const Mesh b = readMesh(b_path);
+  // Output files are opened (created) before the computation, so a bad path fails at once.
+  std::unique_ptr<Output> json_out, colors_out;
+  if (args.has("--json"))
+    json_out = std::make_unique<Output>(json_to_stdout ? std::string("-") : args.value("--json"));
+  if (args.has("--colors")) colors_out = std::make_unique<Output>(args.value("--colors"));
+  const double diagonal = meshDiagonal(a);
+  if (!(diagonal > 0) && !(options.tolerance > 0))
+    throw MeshError(a_path + ": all vertices coincide (zero diagonal); give --tolerance");
+
+  // Progress on a terminal only: the bounds as they tighten, at most ten times a second.
+  double last_print = -1;
+  const bool progress = isatty(fileno(stderr));
+  if (progress) {
+    options.progress = [&](const HausdorffProgress& p) {
+      if (p.seconds - last_print < 0.1) return;
+      last_print = p.seconds;
+      std::fprintf(
+          stderr,
+          "\r\033[Khausdorff: [%.7g, %.7g]  gap %.3g (tolerance %.3g)  %llu samples  %.1f s",
+          p.lower, p.upper, p.upper - p.lower, p.tolerance,
+          static_cast<unsigned long long>(p.samples), p.seconds);
+      std::fflush(stderr);
+    };
+  }
+  const HausdorffResult r = hausdorff(a, b, options);
+  if (progress && last_print >= 0) std::fprintf(stderr, "\r\033[K");
+
+  std::FILE* s = json_to_stdout ? stderr : stdout;
+  std::fprintf(s, "Hausdorff distance between A and B (certified bounds)\n");
+  std::fprintf(s, "  A: %s  %zu vertices, %zu triangles, area %.7g, diagonal %.7g\n",
+               a_path.c_str(), a.positions.size(), a.triangles.size(), surfaceArea(a), diagonal);
+  std::fprintf(s, "  B: %s  %zu vertices, %zu triangles, area %.7g, diagonal %.7g\n",
+               b_path.c_str(), b.positions.size(), b.triangles.size(), surfaceArea(b),
+               meshDiagonal(b));
+  std::fprintf(s, "  tolerance %.7g (%.5f%% of A's diagonal)\n\n", r.tolerance,
+               percent(r.tolerance, diagonal));
+  printDirection(s, "A -> B", r.a_to_b, diagonal, r.tolerance, "A", "B");
+  printDirection(s, "B -> A", r.b_to_a, diagonal, r.tolerance, "B", "A");
+  std::fprintf(s, "\n  Hausdorff distance in [%.7g, %.7g]  (%.5f%% .. %.5f%% of diagonal)%s\n",
+               r.lower, r.upper, percent(r.lower, diagonal), percent(r.upper, diagonal),
+               r.converged ? "" : "  (tolerance not reached: refinement hit rounding size)");
+  std::fprintf(s, "  time %.3f s (hierarchies %.3f s), %llu samples, %llu triangles refined\n",
+               r.seconds, r.build_seconds, static_cast<unsigned long long>(r.counters.samples),
+               static_cast<unsigned long long>(r.counters.triangles_refined));
+
+  if (json_out) {
+    Output& out = *json_out;
+    out.write(
+        "{\n  \"a\": " + jsonMesh(a_path, a) + ",\n  \"b\": " + jsonMesh(b_path, b) +
+        ",\n  \"a_to_b\": " + jsonOneSided(r.a_to_b) + ",\n  \"b_to_a\": " +
+        jsonOneSided(r.b_to_a) + ",\n  \"hausdorff\": {\"lower\": " + jsonNumber(r.lower) +
+        ", \"upper\": " + jsonNumber(r.upper) + "},\n  \"tolerance\": " + jsonNumber(r.tolerance) +
+        ",\n  \"converged\": " + (r.converged ? "true" : "false") + ",\n  \"threads\": " +
+        std::to_string(options.threads) + ",\n  \"seconds\": " + jsonNumber(r.seconds) +
+        ",\n  \"build_seconds\": " + jsonNumber(r.build_seconds) +
+        ",\n  \"samples\": " + std::to_string(r.counters.samples) +
+        ",\n  \"queries\": " + std::to_string(r.counters.queries) +
+        ",\n  \"triangles_refined\": " + std::to_string(r.counters.triangles_refined) + "\n}\n");
+    out.close();
+  }
+  if (colors_out) writeColors(*colors_out, a, r.a_to_b.vertex_distance);
+  return kExitOk;
+}
+
+}  // namespace meshsweeper::cli
