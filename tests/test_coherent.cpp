@@ -1,0 +1,592 @@
+// The coherent queries of a QueryStream (DESIGN.md section 2; paper section 5.1) against brute
+// force, along paths of consecutive points:
+//   closestCoherent (set certificate)          == bruteForceClosest on every step;
+//   closestWithinCoherent(p, 0) (dynamic front) exact; closestWithinCoherent(p, tol) brackets
+//   the truth with upper - lower <= tol;
+//   kClosestCoherent(p, 5)                     distances == bruteForceKClosest;
+//   closestCoherent(p, CoherentState)          (caller-held compact state) == brute force;
+//   a warm (coherent) answer equals a cold one (a fresh QueryStream::closest).
+// Paths (fixed seeds) on armadillo, holes, a torus, an icosphere and a random soup: steps of
+// 0.05% and 0.5% of the bounding-box diagonal, points 0-5% of the diagonal from the surface,
+// some crossing the surface, a large jump (to a random near-surface point, usually across the
+// mesh) every 50 steps. Also: the coherence counters, reset(), a stationary point, one stream
+// used for every coherent kind, and extreme CoherenceOptions.
+//
+// Distances are compared to 1e-12 relative plus 1e-14 of the diagonal absolute: two faces that
+// share the closest edge or vertex give the same distance up to the rounding of coordinates of
+// the size of the mesh (~1e-16 of the diagonal), which is far from 1e-12 relative for a point a
+// hair off the surface.
+#include "core/brute_force.h"
+#include "core/hierarchy.h"
+#include "core/mesh_io.h"
+#include "core/sweep_query.h"
+#include "core/triangle_distance.h"
+#include "scenes/procedural.h"
+
+#include <catch2/catch.hpp>
+
+#include <algorithm>
+#include <cmath>
+#include <filesystem>
+#include <map>
+#include <memory>
+#include <sstream>
+#include <string>
+#include <vector>
+
+using namespace meshsweeper;
+using scenes::Random;
+
+namespace {
+
+constexpr double kRelative = 1e-12;
+constexpr double kAbsolute = 1e-14;  // times the diagonal
+
+std::string num(double x) {
+  std::ostringstream out;
+  out.precision(17);
+  out << x;
+  return out.str();
+}
+
+std::string text(const Vec3& p) { return "(" + num(p.x()) + ", " + num(p.y()) + ", " + num(p.z()) + ")"; }
+
+// Counts the failures of one kind of check; reports the first few in full (with the INFO
+// context), then a total, so a broken invariant does not print thousands of lines.
+class Failures {
+ public:
+  explicit Failures(std::string what) : what_(std::move(what)) {}
+  Failures(const Failures&) = delete;
+  Failures& operator=(const Failures&) = delete;
+  template <class F>
+  void check(bool ok, F&& message) {
+    ++checks_;
+    if (ok) return;
+    if (++count_ <= kShown) FAIL_CHECK(what_ << ": " << message());
+  }
+  ~Failures() {
+    if (count_ > kShown) FAIL_CHECK(what_ << ": " << count_ << " failures in all (first " << kShown << " shown)");
+  }
+  size_t checks() const { return checks_; }
+  size_t count() const { return count_; }
+
+ private:
+  static constexpr size_t kShown = 4;
+  std::string what_;
+  size_t count_ = 0;
+  size_t checks_ = 0;
+};
+
+// A real mesh from data/meshes, read once per binary. A missing file is a failure.
+const Mesh* realMesh(const std::string& name) {
+  static std::map<std::string, std::unique_ptr<Mesh>> cache;
+  auto it = cache.find(name);
+  if (it != cache.end()) return it->second.get();
+  const std::string path = scenes::meshPath(name);
+  std::unique_ptr<Mesh> mesh;
+  if (!std::filesystem::exists(path)) {
+    FAIL_CHECK("missing real mesh " << path << " (run scripts/fetch_data.sh)");
+  } else {
+    mesh = std::make_unique<Mesh>(readMesh(path));
+    mesh->name = name;
+  }
+  return cache.emplace(name, std::move(mesh)).first->second.get();
+}
+
+Vec3 randomUnit(Random& random) {
+  while (true) {
+    const Vec3 v(random.uniform(-1, 1), random.uniform(-1, 1), random.uniform(-1, 1));
+    const double n = v.norm();
+    if (n > 1e-3 && n <= 1) return v / n;
+  }
+}
+
+// ---- Paths ----------------------------------------------------------------------------------
+
+struct PathSpec {
+  const char* name;
+  double step;        // step length, fraction of the diagonal
+  double near, far;   // steer away from the surface below `near`, back toward it beyond `far`
+                      // (fractions of the diagonal); near == 0 lets the path cross the surface
+  size_t steps;
+  size_t jump_every;  // 0: no jumps
+  uint64_t seed;
+};
+
+// Consecutive points: a walk whose direction turns smoothly at random, steered back toward the
+// closest surface point when farther than spec.far and away from it when closer than
+// spec.near, with a jump to a random near-surface point every spec.jump_every steps.
+// `jumps` receives the indices of the jump steps.
+std::vector<Vec3> makePath(const Mesh& mesh, const std::shared_ptr<const Hierarchy>& h, const PathSpec& spec,
+                           std::vector<size_t>* jumps = nullptr) {
+  const double diagonal = meshDiagonal(mesh);
+  const double step = spec.step * diagonal;
+  Random random(spec.seed);
+  QueryStream steer(h);
+  const size_t jump_count = spec.jump_every ? spec.steps / spec.jump_every + 1 : 0;
+  const std::vector<Vec3> targets =
+      scenes::nearSurfacePoints(mesh, jump_count + 1, std::max(spec.far, 1e-4), spec.seed + 17);
+  size_t next_target = 0;
+  Vec3 p = targets[next_target++];
+  Vec3 direction = randomUnit(random);
+  std::vector<Vec3> path;
+  path.reserve(spec.steps);
+  for (size_t i = 0; i < spec.steps; ++i) {
+    if (i > 0 && spec.jump_every && i % spec.jump_every == 0) {
+      p = targets[next_target++];
+      if (jumps) jumps->push_back(i);
+    } else if (i > 0) {
+      const ClosestPoint c = steer.closest(p);
+      Vec3 toward = c.point - p;
+      const double d = toward.norm();
+      toward = d > 0 ? Vec3(toward / d) : Vec3::Zero();
+      direction += 0.35 * randomUnit(random);
+      if (d > spec.far * diagonal) direction += 1.5 * toward;
+      if (d < spec.near * diagonal) direction -= 1.5 * toward;
+      if (direction.norm() < 1e-6) direction = randomUnit(random);
+      direction.normalize();
+      p += step * direction;
+    }
+    path.push_back(p);
+  }
+  return path;
+}
+
+// ---- Checks ---------------------------------------------------------------------------------
+
+struct Truth {
+  std::vector<BruteHit> k;  // bruteForceKClosest(mesh, p, 5): k[0] is the closest
+  double closest() const { return k.front().distance; }
+};
+
+struct Checker {
+  const Mesh& mesh;
+  double diagonal;
+
+  bool same(double got, double expected) const {
+    return std::abs(got - expected) <=
+           kRelative * std::max(std::abs(got), std::abs(expected)) + kAbsolute * diagonal;
+  }
+  // Distance from p to face f, computed as brute force does.
+  double faceDistance(TriangleIndex f, const Vec3& p) const {
+    const Triangle& t = mesh.triangles[f];
+    return std::sqrt(closestPointOnTriangle(p, mesh.positions[t[0]], mesh.positions[t[1]], mesh.positions[t[2]])
+                         .squared_distance);
+  }
+  // An exact answer: distance == brute force, a valid face at that distance, the point at that
+  // distance from p and on that face.
+  void exact(const ClosestPoint& r, const Vec3& p, const Truth& truth, Failures& f) const {
+    const double expected = truth.closest();
+    f.check(same(r.distance, expected), [&] {
+      return "distance " + num(r.distance) + ", brute force " + num(expected) + " (triangle " +
+             std::to_string(truth.k.front().triangle) + "), got triangle " + std::to_string(r.triangle);
+    });
+    const bool valid = r.triangle < mesh.triangles.size();
+    f.check(valid, [&] { return "triangle " + std::to_string(r.triangle) + " out of range"; });
+    if (!valid) return;
+    f.check(same(faceDistance(r.triangle, p), r.distance), [&] {
+      return "triangle " + std::to_string(r.triangle) + " is at " + num(faceDistance(r.triangle, p)) +
+             ", reported " + num(r.distance);
+    });
+    f.check(same((r.point - p).norm(), r.distance),
+            [&] { return "point " + text(r.point) + " is at " + num((r.point - p).norm()); });
+    f.check(faceDistance(r.triangle, r.point) <= kAbsolute * diagonal,
+            [&] { return "point " + text(r.point) + " is off its triangle " + std::to_string(r.triangle); });
+  }
+  // An anytime answer: lower <= truth <= upper == distance, upper - lower <= tolerance, a
+  // surface point of the reported triangle at distance upper.
+  void bracket(const ClosestPoint& r, const Vec3& p, const Truth& truth, double tolerance, Failures& f) const {
+    const double t = truth.closest();
+    const double slack = kRelative * t + kAbsolute * diagonal;
+    f.check(r.lower <= t + slack && r.upper >= t - slack && r.distance == r.upper, [&] {
+      return "[" + num(r.lower) + ", " + num(r.upper) + "] (distance " + num(r.distance) +
+             ") misses the truth " + num(t);
+    });
+    f.check(r.upper - r.lower <= tolerance + slack, [&] {
+      return "upper - lower = " + num(r.upper - r.lower) + " > tolerance " + num(tolerance);
+    });
+    const bool valid = r.triangle < mesh.triangles.size();
+    f.check(valid, [&] { return "triangle " + std::to_string(r.triangle) + " out of range"; });
+    if (!valid) return;
+    f.check(same((r.point - p).norm(), r.upper) && faceDistance(r.triangle, r.point) <= kAbsolute * diagonal,
+            [&] {
+              return "point " + text(r.point) + " (at " + num((r.point - p).norm()) + ") is not a point of triangle " +
+                     std::to_string(r.triangle) + " at distance upper " + num(r.upper);
+            });
+  }
+  void kClosest(const std::vector<TriangleHit>& got, const Vec3& p, const Truth& truth, Failures& f) const {
+    f.check(got.size() == truth.k.size(), [&] {
+      return "k closest: " + std::to_string(got.size()) + " hits, brute force " + std::to_string(truth.k.size());
+    });
+    for (size_t i = 0; i < std::min(got.size(), truth.k.size()); ++i) {
+      f.check(same(got[i].distance, truth.k[i].distance), [&] {
+        return "rank " + std::to_string(i) + ": distance " + num(got[i].distance) + " (triangle " +
+               std::to_string(got[i].triangle) + "), brute force " + num(truth.k[i].distance) + " (triangle " +
+               std::to_string(truth.k[i].triangle) + ")";
+      });
+      if (got[i].triangle < mesh.triangles.size())
+        f.check(same(faceDistance(got[i].triangle, p), got[i].distance),
+                [&] { return "rank " + std::to_string(i) + ": triangle's own distance differs"; });
+    }
+    // Sorted up to rounding (see the [!mayfail] case below for the exact order).
+    for (size_t i = 0; i + 1 < got.size(); ++i)
+      f.check(got[i].distance <= got[i + 1].distance || same(got[i].distance, got[i + 1].distance), [&] {
+        return "k closest not sorted at " + std::to_string(i) + ": " + num(got[i].distance) + " (triangle " +
+               std::to_string(got[i].triangle) + ") before " + num(got[i + 1].distance) + " (triangle " +
+               std::to_string(got[i + 1].triangle) + ")";
+      });
+    for (size_t i = 0; i < got.size(); ++i)
+      for (size_t j = i + 1; j < got.size(); ++j)
+        f.check(got[i].triangle != got[j].triangle,
+                [&] { return "triangle " + std::to_string(got[i].triangle) + " reported twice"; });
+  }
+};
+
+// All the streams of one path, one per query kind, so each kind's counters are its own.
+struct Streams {
+  CoherenceOptions options;
+  QueryStream coherent, exact, anytime, k, cold;
+  CoherentState state;
+  explicit Streams(const std::shared_ptr<const Hierarchy>& h, CoherenceOptions o = {})
+      : options(o), coherent(h, o), exact(h, o), anytime(h, o), k(h, o), cold(h, o) {}
+};
+
+struct PathChecks {
+  Failures coherent{"closestCoherent vs brute force"};
+  Failures state{"closestCoherent(p, CoherentState) vs brute force"};
+  size_t state_certified = 0;
+  Failures exact{"closestWithinCoherent(p, 0) vs brute force"};
+  Failures anytime{"closestWithinCoherent(p, tol)"};
+  Failures k{"kClosestCoherent(p, 5) vs bruteForceKClosest"};
+  Failures warm{"warm (coherent) answer != cold answer"};
+  Failures jumps{"a jump did not restart the dynamic front"};
+};
+
+constexpr size_t kK = 5;
+
+// Runs every coherent kind along `path` and checks each step against brute force.
+void checkPath(const Mesh& mesh, const std::vector<Vec3>& path,
+               Streams& s, PathChecks& checks, double tolerance) {
+  const Checker checker{mesh, meshDiagonal(mesh)};
+  std::vector<TriangleHit> hits;
+  double previous_truth = -1;
+  Vec3 previous = Vec3::Zero();
+  for (size_t i = 0; i < path.size(); ++i) {
+    const Vec3& p = path[i];
+    INFO("step " << i << " of " << path.size() << ", point " << text(p));
+    Truth truth{bruteForceKClosest(mesh, p, kK)};
+    INFO("brute force distance " << num(truth.closest()) << " (triangle " << truth.k.front().triangle << ")");
+
+    const ClosestPoint warm = s.coherent.closestCoherent(p);
+    checker.exact(warm, p, truth, checks.coherent);
+    // The caller-held compact state, the cold stream lending its scratch memory.
+    bool certified = false;
+    const ClosestPoint compact = s.cold.closestCoherent(p, s.state, &certified);
+    checker.exact(compact, p, truth, checks.state);
+    checks.state_certified += certified;
+    const ClosestPoint cold = s.cold.closest(p);
+    checks.warm.check(checker.same(warm.distance, cold.distance) &&
+                          (warm.triangle != cold.triangle || (warm.point == cold.point && warm.barycentric == cold.barycentric)),
+                      [&] {
+                        return "warm " + num(warm.distance) + " (triangle " + std::to_string(warm.triangle) +
+                               "), cold " + num(cold.distance) + " (triangle " + std::to_string(cold.triangle) + ")";
+                      });
+
+    const uint64_t resets = s.exact.coherence().front_resets;
+    const ClosestPoint exact = s.exact.closestWithinCoherent(p, 0);
+    checker.exact(exact, p, truth, checks.exact);
+    checks.exact.check(exact.lower <= exact.upper && exact.upper == exact.distance &&
+                           checker.same(exact.lower, exact.upper),
+                       [&] { return "tolerance 0 gave [" + num(exact.lower) + ", " + num(exact.upper) + "]"; });
+    // The front restarts when the point moves farther than jump_factor times its last
+    // distance; the exact stream's last distance is the previous truth.
+    if (previous_truth >= 0 && (p - previous).norm() > 1.01 * s.options.jump_factor * previous_truth) {
+      checks.jumps.check(s.exact.coherence().front_resets == resets + 1, [&] {
+        return "moved " + num((p - previous).norm()) + " from a point at distance " + num(previous_truth) +
+               "; front_resets " + std::to_string(resets) + " -> " + std::to_string(s.exact.coherence().front_resets);
+      });
+    }
+
+    const ClosestPoint approx = s.anytime.closestWithinCoherent(p, tolerance);
+    checker.bracket(approx, p, truth, tolerance, checks.anytime);
+
+    s.k.kClosestCoherent(p, kK, hits);
+    checker.kClosest(hits, p, truth, checks.k);
+
+    previous_truth = truth.closest();
+    previous = p;
+  }
+}
+
+// The counters of a stream that answered only closestCoherent, `steps` times.
+void checkSetCounters(const QueryStream& s, uint64_t steps, bool expect_certified) {
+  const CoherenceCounters& c = s.coherence();
+  INFO("steps " << c.steps << ", certified " << c.certified << ", rebuilds " << c.rebuilds << ", candidates "
+                << c.candidates);
+  CHECK(c.steps == steps);
+  CHECK(c.certified + c.rebuilds == c.steps);
+  CHECK(c.rebuilds >= 1);  // the first step has no set
+  CHECK(c.front_resets == 0);
+  CHECK(c.recomputed == 0);
+  if (expect_certified) CHECK(c.certified > 0);
+}
+
+struct Case {
+  std::string name;
+  const Mesh* mesh;
+};
+
+// Three paths per mesh: small steps kept 0.1%-5% off the surface; small steps within 0.5% of
+// the surface, crossing it; large steps (0.5%) within 5%, crossing it. Jumps every 50 steps.
+void checkMesh(const Case& c, size_t steps, uint64_t seed) {
+  REQUIRE(c.mesh != nullptr);
+  const Mesh& mesh = *c.mesh;
+  const double diagonal = meshDiagonal(mesh);
+  const auto h = Hierarchy::build(mesh);
+  const PathSpec specs[] = {
+      {"step 0.05%, 0.1-5% off", 0.0005, 0.001, 0.05, steps, 50, seed},
+      {"step 0.05%, within 0.5%, crossing", 0.0005, 0.0, 0.005, steps, 50, seed + 1},
+      {"step 0.5%, within 5%, crossing", 0.005, 0.0, 0.05, steps, 50, seed + 2},
+  };
+  for (const PathSpec& spec : specs) {
+    INFO("mesh " << c.name << " (" << mesh.triangles.size() << " triangles), path " << spec.name << ", seed "
+                 << spec.seed);
+    std::vector<size_t> jumps;
+    const std::vector<Vec3> path = makePath(mesh, h, spec, &jumps);
+    Streams s(h);
+    PathChecks checks;
+    checkPath(mesh, path, s, checks, 1e-3 * diagonal);
+    checkSetCounters(s.coherent, path.size(), spec.step < 0.001);
+    if (spec.step < 0.001) CHECK(checks.state_certified > 0);
+    // Every jump restarts the dynamic front (plus the first step).
+    CHECK(s.exact.coherence().front_resets >= jumps.size() + 1);
+    CHECK(s.k.coherence().front_resets >= jumps.size() + 1);
+    CHECK(s.exact.coherence().recomputed > 0);
+    CHECK(s.exact.coherence().steps == path.size());
+    CHECK(s.exact.coherence().certified + s.exact.coherence().rebuilds == 0);
+  }
+}
+
+}  // namespace
+
+TEST_CASE("coherent queries along paths on real meshes", "[coherent][real]") {
+  for (const char* name : {"armadillo", "holes"}) {
+    const Case c{name, realMesh(name)};
+    if (!c.mesh) continue;
+    checkMesh(c, std::string(name) == "armadillo" ? 500 : 800, 0xc0ffee01);
+  }
+}
+
+TEST_CASE("coherent queries along paths on procedural meshes", "[coherent]") {
+  const Mesh torus = scenes::torus(1.0, 0.3, 96, 48);
+  const Mesh sphere = scenes::icosphere(4);
+  const Mesh soup = scenes::randomSoup(3000, 7);
+  for (const Case& c : {Case{"torus 96x48", &torus}, Case{"icosphere 4", &sphere}, Case{"random soup 3000", &soup}})
+    checkMesh(c, 500, 0xc0ffee11);
+}
+
+TEST_CASE("coherent queries: a stationary point", "[coherent]") {
+  const Mesh mesh = scenes::torus(1.0, 0.3, 64, 32);
+  const auto h = Hierarchy::build(mesh);
+  const Checker checker{mesh, meshDiagonal(mesh)};
+  const std::vector<Vec3> points = {
+      Vec3(1.0, 0.1, 0.35),                                   // off the surface
+      scenes::surfacePoints(mesh, 1, 3).front(),              // on the surface
+      mesh.positions[mesh.triangles[10][1]],                  // on a vertex
+      Vec3(0, 0, 0),                                          // the centre: every ring face at ~0.7
+  };
+  for (size_t i = 0; i < points.size(); ++i) {
+    const Vec3& p = points[i];
+    INFO("mesh torus 64x32, stationary point " << i << " " << text(p));
+    Streams s(h);
+    PathChecks checks;
+    const Truth truth{bruteForceKClosest(mesh, p, kK)};
+    std::vector<TriangleHit> hits;
+    for (int repeat = 0; repeat < 20; ++repeat) {
+      INFO("repeat " << repeat);
+      checker.exact(s.coherent.closestCoherent(p), p, truth, checks.coherent);
+      checker.exact(s.exact.closestWithinCoherent(p, 0), p, truth, checks.exact);
+      checker.bracket(s.anytime.closestWithinCoherent(p, 0.01), p, truth, 0.01, checks.anytime);
+      s.k.kClosestCoherent(p, kK, hits);
+      checker.kClosest(hits, p, truth, checks.k);
+    }
+    CHECK(s.coherent.coherence().certified + s.coherent.coherence().rebuilds == 20);
+    // The point never moves: the front starts once and is never restarted.
+    CHECK(s.exact.coherence().front_resets == 1);
+    CHECK(s.k.coherence().front_resets == 1);
+    CHECK(s.exact.coherence().recomputed == 0);
+  }
+}
+
+TEST_CASE("coherent queries: reset() forgets the coherent state", "[coherent]") {
+  const Mesh* mesh = realMesh("holes");
+  REQUIRE(mesh);
+  const auto h = Hierarchy::build(*mesh);
+  const Checker checker{*mesh, meshDiagonal(*mesh)};
+  const PathSpec spec{"step 0.05%, 0.1-5% off", 0.0005, 0.001, 0.05, 120, 0, 99};
+  const std::vector<Vec3> path = makePath(*mesh, h, spec);
+  INFO("mesh holes, path " << spec.name << ", seed " << spec.seed);
+  Streams s(h);
+  PathChecks checks;
+  std::vector<TriangleHit> hits;
+  for (size_t i = 0; i < path.size(); ++i) {
+    const Vec3& p = path[i];
+    INFO("step " << i << " " << text(p));
+    const Truth truth{bruteForceKClosest(*mesh, p, kK)};
+    if (i % 40 == 20) {
+      // After reset(): the next closestCoherent rebuilds its set and the next front query
+      // starts from the roots; answers stay exact.
+      s.coherent.reset();
+      s.exact.reset();
+      s.k.reset();
+      // Whatever reset() does to the counters (see the [!mayfail] case below), the next
+      // queries count from there.
+      const CoherenceCounters before_set = s.coherent.coherence();
+      const CoherenceCounters before_front = s.exact.coherence();
+      const CoherenceCounters before_k = s.k.coherence();
+      checker.exact(s.coherent.closestCoherent(p), p, truth, checks.coherent);
+      checker.exact(s.exact.closestWithinCoherent(p, 0), p, truth, checks.exact);
+      s.k.kClosestCoherent(p, kK, hits);
+      checker.kClosest(hits, p, truth, checks.k);
+      CHECK(s.coherent.coherence().rebuilds == before_set.rebuilds + 1);
+      CHECK(s.coherent.coherence().certified == before_set.certified);
+      CHECK(s.exact.coherence().front_resets == before_front.front_resets + 1);
+      CHECK(s.k.coherence().front_resets == before_k.front_resets + 1);
+      CHECK(s.exact.frontSize() > 0);
+    } else {
+      checker.exact(s.coherent.closestCoherent(p), p, truth, checks.coherent);
+      checker.exact(s.exact.closestWithinCoherent(p, 0), p, truth, checks.exact);
+      s.k.kClosestCoherent(p, kK, hits);
+      checker.kClosest(hits, p, truth, checks.k);
+    }
+  }
+}
+
+// The header says the coherence counters count "since the stream was created or reset";
+// QueryStream::reset() (core/sweep_query.cpp) leaves them untouched. Kept as a known failure
+// until the contract and the code agree.
+TEST_CASE("coherent queries: reset() zeroes the coherence counters", "[coherent][!mayfail]") {
+  const Mesh mesh = scenes::icosphere(3);
+  const auto h = Hierarchy::build(mesh);
+  QueryStream s(h);
+  std::vector<TriangleHit> hits;
+  for (int i = 0; i < 10; ++i) {
+    const Vec3 p(1.2 + 0.001 * i, 0.1, 0.2);
+    s.closestCoherent(p);
+    s.closestWithinCoherent(p, 0);
+    s.kClosestCoherent(p, 3, hits);
+  }
+  REQUIRE(s.coherence().steps == 30);
+  s.reset();
+  const CoherenceCounters& c = s.coherence();
+  INFO("after reset(): steps " << c.steps << ", certified " << c.certified << ", rebuilds " << c.rebuilds
+                               << ", front_resets " << c.front_resets << ", recomputed " << c.recomputed);
+  CHECK(c.steps == 0);
+  CHECK(c.certified == 0);
+  CHECK(c.rebuilds == 0);
+  CHECK(c.candidates == 0);
+  CHECK(c.front_resets == 0);
+  CHECK(c.recomputed == 0);
+}
+
+TEST_CASE("coherent queries: one stream for every coherent kind", "[coherent]") {
+  const Mesh* mesh = realMesh("holes");
+  REQUIRE(mesh);
+  const auto h = Hierarchy::build(*mesh);
+  const double diagonal = meshDiagonal(*mesh);
+  const Checker checker{*mesh, diagonal};
+  const PathSpec spec{"step 0.5%, within 5%, crossing", 0.005, 0.0, 0.05, 300, 50, 5};
+  const std::vector<Vec3> path = makePath(*mesh, h, spec);
+  INFO("mesh holes, path " << spec.name << ", seed " << spec.seed);
+  QueryStream s(h);
+  PathChecks checks;
+  std::vector<TriangleHit> hits;
+  for (size_t i = 0; i < path.size(); ++i) {
+    const Vec3& p = path[i];
+    INFO("step " << i << " " << text(p));
+    const Truth truth{bruteForceKClosest(*mesh, p, kK)};
+    // Varying order and kinds on the same stream; also the fresh queries in between.
+    switch (i % 4) {
+      case 0:
+        checker.exact(s.closestCoherent(p), p, truth, checks.coherent);
+        s.kClosestCoherent(p, kK, hits);
+        checker.kClosest(hits, p, truth, checks.k);
+        break;
+      case 1:
+        checker.exact(s.closestWithinCoherent(p, 0), p, truth, checks.exact);
+        checker.exact(s.closestCoherent(p), p, truth, checks.coherent);
+        break;
+      case 2:
+        checker.bracket(s.closestWithinCoherent(p, 0.01 * diagonal), p, truth, 0.01 * diagonal, checks.anytime);
+        checker.exact(s.closest(p), p, truth, checks.warm);
+        s.kClosestCoherent(p, kK, hits);
+        checker.kClosest(hits, p, truth, checks.k);
+        break;
+      default:
+        s.kClosestCoherent(p, kK, hits);
+        checker.kClosest(hits, p, truth, checks.k);
+        checker.exact(s.closestWithinCoherent(p, 0), p, truth, checks.exact);
+        checker.exact(s.closestCoherent(p), p, truth, checks.coherent);
+        break;
+    }
+  }
+}
+
+TEST_CASE("coherent queries: extreme CoherenceOptions stay exact", "[coherent]") {
+  const Mesh mesh = scenes::torus(1.0, 0.3, 64, 32);
+  const auto h = Hierarchy::build(mesh);
+  const double diagonal = meshDiagonal(mesh);
+  struct Named {
+    const char* name;
+    CoherenceOptions options;
+  };
+  std::vector<Named> variants;
+  variants.push_back({"one candidate", CoherenceOptions{6, 1, 4096, 1.0}});
+  variants.push_back({"no reach", CoherenceOptions{0, 96, 4096, 1.0}});
+  variants.push_back({"huge reach, few candidates", CoherenceOptions{1000, 8, 4096, 1.0}});
+  variants.push_back({"tiny front budget", CoherenceOptions{6, 96, 16, 1.0}});
+  variants.push_back({"never jump", CoherenceOptions{6, 96, 1u << 30, 1e300}});
+  variants.push_back({"always jump", CoherenceOptions{6, 96, 4096, 0.0}});
+  const PathSpec specs[] = {
+      {"step 0.05%, within 0.5%, crossing", 0.0005, 0.0, 0.005, 200, 50, 31},
+      {"step 0.5%, within 5%, crossing", 0.005, 0.0, 0.05, 200, 50, 32},
+  };
+  for (const PathSpec& spec : specs) {
+    const std::vector<Vec3> path = makePath(mesh, h, spec);
+    for (const Named& v : variants) {
+      INFO("mesh torus 64x32, path " << spec.name << ", options: " << v.name);
+      Streams s(h, v.options);
+      PathChecks checks;
+      checkPath(mesh, path, s, checks, 1e-3 * diagonal);
+      checkSetCounters(s.coherent, path.size(), false);
+    }
+  }
+}
+
+// kClosest's contract: by increasing distance, ties by triangle index. kClosestCoherent keys its
+// front by bound + drift (core/sweep_query.cpp), so two faces whose distances differ by less
+// than the rounding of that sum (faces sharing the closest vertex, ~1 ulp apart) come out in
+// triangle-index order instead of distance order. Known failure until the output is sorted.
+TEST_CASE("coherent queries: kClosestCoherent's exact order", "[coherent][!mayfail]") {
+  const Mesh* mesh = realMesh("holes");
+  REQUIRE(mesh);
+  const auto h = Hierarchy::build(*mesh);
+  const PathSpec spec{"step 0.5%, within 5%, crossing", 0.005, 0.0, 0.05, 300, 50, 5};
+  const std::vector<Vec3> path = makePath(*mesh, h, spec);
+  QueryStream s(h);
+  std::vector<TriangleHit> hits;
+  size_t misordered = 0;
+  for (size_t i = 0; i < path.size(); ++i) {
+    s.kClosestCoherent(path[i], kK, hits);
+    for (size_t j = 0; j + 1 < hits.size(); ++j) {
+      const bool ordered = hits[j].distance < hits[j + 1].distance ||
+                           (hits[j].distance == hits[j + 1].distance && hits[j].triangle < hits[j + 1].triangle);
+      if (!ordered && ++misordered <= 3)
+        FAIL_CHECK("mesh holes, path " << spec.name << ", seed " << spec.seed << ", step " << i << " "
+                                       << text(path[i]) << ": rank " << j << " " << num(hits[j].distance)
+                                       << " (triangle " << hits[j].triangle << ") before "
+                                       << num(hits[j + 1].distance) << " (triangle " << hits[j + 1].triangle << ")");
+    }
+  }
+  CHECK(misordered == 0);
+}

@@ -1,0 +1,729 @@
+// Moving and deforming bodies (deform/; DESIGN.md section 3; paper sections 5.2, 5.3) against
+// brute force on the moved or deformed mesh (a Mesh with the current positions and the same
+// triangles), step by step:
+//  - RigidBody: a random pose every step; closest and closestCoherent for world points near
+//    the moved surface; non-rigid poses throw.
+//  - KeyframeBody: 2-4 key frames made by smooth non-rigid deformations (waves along the
+//    normals, twists); at many times the bounds are proven for the interpolated positions
+//    (validateGeometry) and every query kind through QueryStream::setGeometry is exact; coherent
+//    queries along a path while the time advances; one frame; bad frames throw.
+//  - DeformingBody: displacements within the inflated bounds are accepted and queries stay
+//    exact; a step past a bound is refused and reported and changes nothing; inflating more or
+//    re-anchoring accepts it; per-vertex bounds; bad input throws.
+// Distances: 1e-12 relative plus 1e-12 of the diagonal absolute for rigid bodies (rounding of the
+// transform), 1e-14 of the diagonal otherwise (faces sharing the closest edge or vertex).
+#include "core/brute_force.h"
+#include "core/hierarchy.h"
+#include "core/mesh_io.h"
+#include "core/sweep_query.h"
+#include "core/triangle_distance.h"
+#include "deform/inflated_bounds.h"
+#include "deform/keyframe_bounds.h"
+#include "deform/rigid_body.h"
+#include "scenes/procedural.h"
+
+#include <catch2/catch.hpp>
+
+#include <Eigen/Geometry>
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+#include <filesystem>
+#include <limits>
+#include <map>
+#include <memory>
+#include <sstream>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+using namespace meshsweeper;
+using scenes::Random;
+
+namespace {
+
+constexpr double kRelative = 1e-12;
+constexpr double kPi = 3.14159265358979323846;
+
+std::string num(double x) {
+  std::ostringstream out;
+  out.precision(17);
+  out << x;
+  return out.str();
+}
+
+std::string text(const Vec3& p) { return "(" + num(p.x()) + ", " + num(p.y()) + ", " + num(p.z()) + ")"; }
+
+// Counts the failures of one kind of check; shows the first few in full, then a total.
+class Failures {
+ public:
+  explicit Failures(std::string what) : what_(std::move(what)) {}
+  Failures(const Failures&) = delete;
+  Failures& operator=(const Failures&) = delete;
+  template <class F>
+  void check(bool ok, F&& message) {
+    ++checks_;
+    if (ok) return;
+    if (++count_ <= kShown) FAIL_CHECK(what_ << ": " << message());
+  }
+  ~Failures() {
+    if (count_ > kShown) FAIL_CHECK(what_ << ": " << count_ << " failures in all (first " << kShown << " shown)");
+  }
+
+ private:
+  static constexpr size_t kShown = 4;
+  std::string what_;
+  size_t count_ = 0;
+  size_t checks_ = 0;
+};
+
+const Mesh* realMesh(const std::string& name) {
+  static std::map<std::string, std::unique_ptr<Mesh>> cache;
+  auto it = cache.find(name);
+  if (it != cache.end()) return it->second.get();
+  const std::string path = scenes::meshPath(name);
+  std::unique_ptr<Mesh> mesh;
+  if (!std::filesystem::exists(path)) {
+    FAIL_CHECK("missing real mesh " << path << " (run scripts/fetch_data.sh)");
+  } else {
+    mesh = std::make_unique<Mesh>(readMesh(path));
+    mesh->name = name;
+  }
+  return cache.emplace(name, std::move(mesh)).first->second.get();
+}
+
+Mesh withPositions(const Mesh& mesh, const std::vector<Vec3>& positions) {
+  Mesh out;
+  out.positions = positions;
+  out.triangles = mesh.triangles;
+  out.name = mesh.name + " (moved)";
+  return out;
+}
+
+Vec3 randomUnit(Random& random) {
+  while (true) {
+    const Vec3 v(random.uniform(-1, 1), random.uniform(-1, 1), random.uniform(-1, 1));
+    const double n = v.norm();
+    if (n > 1e-3 && n <= 1) return v / n;
+  }
+}
+
+Vec3 centreOf(const Mesh& mesh) {
+  Vec3 lower, upper;
+  meshBounds(mesh, lower, upper);
+  return 0.5 * (lower + upper);
+}
+
+// Area-weighted vertex normals (unit; zero for vertices of zero-area faces only).
+std::vector<Vec3> vertexNormals(const Mesh& mesh) {
+  std::vector<Vec3> n(mesh.positions.size(), Vec3::Zero());
+  for (const Triangle& t : mesh.triangles) {
+    const Vec3 a = (mesh.positions[t[1]] - mesh.positions[t[0]]).cross(mesh.positions[t[2]] - mesh.positions[t[0]]);
+    for (VertexIndex v : t) n[v] += a;
+  }
+  for (Vec3& x : n) {
+    const double l = x.norm();
+    if (l > 0) x /= l;
+  }
+  return n;
+}
+
+// x + amplitude * sin(2 pi waves * (x . axis) / diagonal + phase) * normal: a smooth bump field.
+std::vector<Vec3> wave(const Mesh& mesh, double amplitude, double waves, const Vec3& axis, double phase) {
+  const double diagonal = meshDiagonal(mesh);
+  const std::vector<Vec3> normals = vertexNormals(mesh);
+  std::vector<Vec3> out(mesh.positions.size());
+  for (size_t v = 0; v < out.size(); ++v) {
+    const Vec3& x = mesh.positions[v];
+    out[v] = x + amplitude * std::sin(2 * kPi * waves * x.dot(axis) / diagonal + phase) * normals[v];
+  }
+  return out;
+}
+
+// Rotation about the z axis through the centre by an angle growing linearly along z (a twist).
+std::vector<Vec3> twist(const Mesh& mesh, const std::vector<Vec3>& from, double max_angle) {
+  Vec3 lower, upper;
+  meshBounds(mesh, lower, upper);
+  const Vec3 c = 0.5 * (lower + upper);
+  const double half = std::max(0.5 * (upper.z() - lower.z()), 1e-12);
+  std::vector<Vec3> out(from.size());
+  for (size_t v = 0; v < out.size(); ++v) {
+    const Vec3 r = from[v] - c;
+    const double angle = max_angle * r.z() / half;
+    const double cs = std::cos(angle), sn = std::sin(angle);
+    out[v] = c + Vec3(cs * r.x() - sn * r.y(), sn * r.x() + cs * r.y(), r.z());
+  }
+  return out;
+}
+
+// ---- Checks ---------------------------------------------------------------------------------
+
+struct Checker {
+  const Mesh& mesh;  // the current (moved or deformed) mesh
+  double diagonal;
+  double absolute;   // absolute slack, mesh units
+
+  bool same(double got, double expected) const {
+    return std::abs(got - expected) <= kRelative * std::max(std::abs(got), std::abs(expected)) + absolute;
+  }
+  double faceDistance(TriangleIndex f, const Vec3& p) const {
+    const Triangle& t = mesh.triangles[f];
+    return std::sqrt(squaredDistanceToTriangle(p, mesh.positions[t[0]], mesh.positions[t[1]], mesh.positions[t[2]]));
+  }
+  void exact(const ClosestPoint& r, const Vec3& p, const BruteHit& truth, Failures& f) const {
+    f.check(same(r.distance, truth.distance), [&] {
+      return "distance " + num(r.distance) + " (triangle " + std::to_string(r.triangle) + "), brute force " +
+             num(truth.distance) + " (triangle " + std::to_string(truth.triangle) + ")";
+    });
+    const bool valid = r.triangle < mesh.triangles.size();
+    f.check(valid, [&] { return "triangle " + std::to_string(r.triangle) + " out of range"; });
+    if (!valid) return;
+    f.check(same(faceDistance(r.triangle, p), r.distance), [&] {
+      return "triangle " + std::to_string(r.triangle) + " is at " + num(faceDistance(r.triangle, p)) + ", reported " +
+             num(r.distance);
+    });
+    f.check(same((r.point - p).norm(), r.distance) && faceDistance(r.triangle, r.point) <= absolute + 1e-15 * diagonal,
+            [&] {
+              return "point " + text(r.point) + " is at " + num((r.point - p).norm()) + " from p and " +
+                     num(faceDistance(r.triangle, r.point)) + " from its triangle " + std::to_string(r.triangle);
+            });
+  }
+  void bracket(const ClosestPoint& r, const Vec3& p, double truth, double tolerance, Failures& f) const {
+    const double slack = kRelative * truth + absolute;
+    f.check(r.lower <= truth + slack && r.upper >= truth - slack && r.upper - r.lower <= tolerance + slack, [&] {
+      return "[" + num(r.lower) + ", " + num(r.upper) + "] vs truth " + num(truth) + ", tolerance " + num(tolerance);
+    });
+    const bool valid = r.triangle < mesh.triangles.size();
+    f.check(valid && same((r.point - p).norm(), r.upper) &&
+                faceDistance(r.triangle, r.point) <= absolute + 1e-15 * diagonal,
+            [&] { return "point " + text(r.point) + " is not on triangle " + std::to_string(r.triangle) + " at upper"; });
+  }
+  template <class Hit>
+  void hits(const std::vector<Hit>& got, const std::vector<BruteHit>& truth, const Vec3& p, Failures& f) const {
+    f.check(got.size() == truth.size(), [&] {
+      return std::to_string(got.size()) + " hits, brute force " + std::to_string(truth.size());
+    });
+    for (size_t i = 0; i < std::min(got.size(), truth.size()); ++i) {
+      f.check(same(got[i].distance, truth[i].distance), [&] {
+        return "rank " + std::to_string(i) + ": " + num(got[i].distance) + " (triangle " +
+               std::to_string(got[i].triangle) + "), brute force " + num(truth[i].distance) + " (triangle " +
+               std::to_string(truth[i].triangle) + ")";
+      });
+      if (got[i].triangle < mesh.triangles.size())
+        f.check(same(faceDistance(got[i].triangle, p), got[i].distance),
+                [&] { return "rank " + std::to_string(i) + ": the triangle's own distance differs"; });
+    }
+  }
+};
+
+struct QueryChecks {
+  Failures closest{"closest"};
+  Failures exact{"closestWithin(p, 0)"};
+  Failures anytime{"closestWithin(p, tol)"};
+  Failures k{"kClosest(p, 5)"};
+  Failures within{"within(p, d)"};
+  Failures coherent{"closestCoherent"};
+  Failures front{"closestWithinCoherent(p, 0)"};
+  Failures k_coherent{"kClosestCoherent(p, 5)"};
+  Failures state{"closestCoherent(p, CoherentState)"};
+};
+
+// Every fresh query kind through `stream` (already on the body's geometry) against brute force
+// on `mesh` (the body's current positions).
+void checkFreshQueries(const Mesh& mesh, QueryStream& stream, const std::vector<Vec3>& points, QueryChecks& c) {
+  const double diagonal = meshDiagonal(mesh);
+  const Checker checker{mesh, diagonal, 1e-14 * diagonal};
+  std::vector<TriangleHit> hits;
+  for (size_t i = 0; i < points.size(); ++i) {
+    const Vec3& p = points[i];
+    INFO("point " << i << " " << text(p));
+    const std::vector<BruteHit> k = bruteForceKClosest(mesh, p, 5);
+    checker.exact(stream.closest(p), p, k.front(), c.closest);
+    checker.exact(stream.closestWithin(p, 0), p, k.front(), c.exact);
+    checker.bracket(stream.closestWithin(p, 0.002 * diagonal), p, k.front().distance, 0.002 * diagonal, c.anytime);
+    stream.kClosest(p, 5, hits);
+    checker.hits(hits, k, p, c.k);
+    // within: a radius between ranks 2 and 3, away from both, so rounding cannot move a face
+    // across it.
+    if (k.size() == 5 && k[3].distance - k[2].distance > 1e-9 * diagonal) {
+      const double d = 0.5 * (k[2].distance + k[3].distance);
+      stream.within(p, d, hits);
+      checker.hits(hits, bruteForceWithin(mesh, p, d), p, c.within);
+    }
+  }
+}
+
+// Query points for a mesh: near the surface (within 2% of the diagonal), in the box, on vertices.
+std::vector<Vec3> queryPoints(const Mesh& mesh, size_t near, size_t box, size_t vertices, uint64_t seed) {
+  std::vector<Vec3> points = scenes::nearSurfacePoints(mesh, near, 0.02, seed);
+  const std::vector<Vec3> in_box = scenes::randomPointsInBox(mesh, box, 0.1, seed + 1);
+  points.insert(points.end(), in_box.begin(), in_box.end());
+  Random random(seed + 2);
+  for (size_t i = 0; i < vertices; ++i) points.push_back(mesh.positions[mesh.triangles[random.index(mesh.triangles.size())][0]]);
+  return points;
+}
+
+// A walk of `steps` points near `mesh`: small smooth steps (0.1% of the diagonal), pulled back
+// toward the closest surface point beyond 3% of the diagonal.
+std::vector<Vec3> walk(const Mesh& mesh, const std::shared_ptr<const Hierarchy>& h, size_t steps, uint64_t seed) {
+  QueryStream steer(h);
+  const double diagonal = meshDiagonal(mesh);
+  Random random(seed);
+  Vec3 p = scenes::nearSurfacePoints(mesh, 1, 0.01, seed).front();
+  Vec3 direction = randomUnit(random);
+  std::vector<Vec3> out;
+  for (size_t i = 0; i < steps; ++i) {
+    const ClosestPoint c = steer.closest(p);
+    direction += 0.35 * randomUnit(random);
+    if (c.distance > 0.03 * diagonal) direction += 1.5 * (c.point - p) / c.distance;
+    direction.normalize();
+    p += 0.001 * diagonal * direction;
+    out.push_back(p);
+  }
+  return out;
+}
+
+// ---- Rigid ----------------------------------------------------------------------------------
+
+Eigen::Isometry3d randomPose(Random& random, double translation) {
+  const Eigen::Quaterniond q(random.uniform(-1, 1), random.uniform(-1, 1), random.uniform(-1, 1), random.uniform(-1, 1));
+  Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();
+  pose.linear() = q.normalized().toRotationMatrix();
+  pose.translation() = translation * Vec3(random.uniform(-1, 1), random.uniform(-1, 1), random.uniform(-1, 1));
+  return pose;
+}
+
+std::vector<Vec3> transformed(const Mesh& mesh, const Eigen::Isometry3d& pose) {
+  std::vector<Vec3> out(mesh.positions.size());
+  for (size_t v = 0; v < out.size(); ++v) out[v] = pose * mesh.positions[v];
+  return out;
+}
+
+void checkRigid(const Mesh& mesh, size_t steps, uint64_t seed) {
+  const auto h = Hierarchy::build(mesh);
+  const double diagonal = meshDiagonal(mesh);
+  RigidBody body(h);
+  QueryStream fresh(h), coherent(h), smooth(h);
+  Random random(seed);
+  // Body-frame points near the rest surface; each step places one in the world.
+  const std::vector<Vec3> local = scenes::nearSurfacePoints(mesh, steps, 0.03, seed + 1);
+  const std::vector<Vec3> path = walk(mesh, h, steps, seed + 2);
+  Failures closest("RigidBody::closest"), warm("RigidBody::closestCoherent (random poses)"),
+      smooth_f("RigidBody::closestCoherent (smooth motion)");
+  const Vec3 axis = randomUnit(random);
+  const Vec3 velocity = 0.002 * diagonal * randomUnit(random);
+  for (size_t i = 0; i < steps; ++i) {
+    INFO("mesh " << mesh.name << ", step " << i);
+    // A random pose every step, a world point near the moved surface.
+    const Eigen::Isometry3d pose = randomPose(random, 2 * diagonal);
+    body.setPose(pose);
+    const Mesh world = withPositions(mesh, transformed(mesh, pose));
+    const Checker checker{world, diagonal, 1e-12 * diagonal};
+    const Vec3 p = pose * local[i] + 0.001 * diagonal * randomUnit(random);
+    INFO("random pose: world point " << text(p));
+    const BruteHit truth = bruteForceClosest(world, p);
+    checker.exact(body.closest(fresh, p), p, truth, closest);
+    checker.exact(body.closestCoherent(coherent, p), p, truth, warm);
+
+    // A smoothly moving body (rotation about a fixed axis, translation) and a smoothly moving
+    // world point (the body-frame walk carried by the motion plus a drift of its own).
+    Eigen::Isometry3d moving = Eigen::Isometry3d::Identity();
+    moving.linear() = Eigen::AngleAxisd(0.01 * static_cast<double>(i), axis).toRotationMatrix();
+    moving.translation() = static_cast<double>(i) * velocity;
+    body.setPose(moving);
+    const Mesh world2 = withPositions(mesh, transformed(mesh, moving));
+    const Checker checker2{world2, diagonal, 1e-12 * diagonal};
+    const Vec3 q = moving * path[i] + 0.0005 * diagonal * std::sin(0.05 * static_cast<double>(i)) * axis;
+    INFO("smooth pose: world point " << text(q));
+    checker2.exact(body.closestCoherent(smooth, q), q, bruteForceClosest(world2, q), smooth_f);
+  }
+  CHECK(smooth.coherence().certified + smooth.coherence().rebuilds == steps);
+  CHECK(smooth.coherence().certified > 0);
+}
+
+// ---- Key frames -----------------------------------------------------------------------------
+
+// Interpolated positions as the body documents them: frame floor(t) and the next, weight t -
+// floor(t), t clamped to [0, frames - 1].
+std::vector<Vec3> interpolate(const std::vector<std::vector<Vec3>>& frames, double t) {
+  const size_t last = frames.size() - 1;
+  t = std::clamp(t, 0.0, static_cast<double>(last));
+  const size_t f = std::min(static_cast<size_t>(t), last == 0 ? 0 : last - 1);
+  const double s = last == 0 ? 0.0 : t - static_cast<double>(f);
+  const auto& a = frames[f];
+  const auto& b = frames[last == 0 ? 0 : f + 1];
+  std::vector<Vec3> out(a.size());
+  for (size_t v = 0; v < out.size(); ++v) out[v] = (1 - s) * a[v] + s * b[v];
+  return out;
+}
+
+std::vector<std::vector<Vec3>> keyFrames(const Mesh& mesh, size_t count) {
+  const double diagonal = meshDiagonal(mesh);
+  std::vector<std::vector<Vec3>> frames;
+  frames.push_back(mesh.positions);
+  frames.push_back(wave(mesh, 0.02 * diagonal, 3, Vec3(0, 1, 0), 0.3));
+  if (count > 2) frames.push_back(twist(mesh, wave(mesh, 0.01 * diagonal, 5, Vec3(1, 0, 0), 1.1), 0.4));
+  if (count > 3) frames.push_back(twist(mesh, mesh.positions, -0.3));
+  frames.resize(count);
+  return frames;
+}
+
+void checkKeyframes(const Mesh& mesh, size_t frame_count, size_t points_per_time, size_t path_steps, uint64_t seed) {
+  const auto h = Hierarchy::build(mesh);
+  const double diagonal = meshDiagonal(mesh);
+  const std::vector<std::vector<Vec3>> frames = keyFrames(mesh, frame_count);
+  KeyframeBody body(h, frames);
+  REQUIRE(body.frameCount() == frame_count);
+  QueryStream stream(h);
+  stream.setGeometry(&body.geometry());
+  const double end = static_cast<double>(frame_count - 1);
+  std::vector<double> times = {0, 0.25, 0.5, 1, 1.37, end - 0.5, end - 1e-9, end, end / 3, 0.999999, -0.5, end + 4};
+  QueryChecks checks;
+  Failures positions("KeyframeBody::positions() vs interpolation"), bounds("validateGeometry");
+  for (size_t ti = 0; ti < times.size(); ++ti) {
+    const double t = times[ti];
+    INFO("mesh " << mesh.name << ", " << frame_count << " key frames, t = " << num(t));
+    body.setTime(t);
+    CHECK(body.time() == std::clamp(t, 0.0, end));
+    const std::vector<Vec3> expected = interpolate(frames, t);
+    double worst = 0;
+    for (size_t v = 0; v < expected.size(); ++v) worst = std::max(worst, (expected[v] - body.positions()[v]).norm());
+    positions.check(worst <= 1e-14 * diagonal, [&] { return "positions off by " + num(worst); });
+    const std::string valid = validateGeometry(*h, body.geometry());
+    bounds.check(valid.empty(), [&] { return "bounds not proven: " + valid; });
+    const Mesh now = withPositions(mesh, body.positions());
+    checkFreshQueries(now, stream, queryPoints(now, points_per_time, points_per_time / 4 + 1, 2, seed + 7 * ti), checks);
+  }
+
+  // interpolateBounds(t) gives the bounds setTime(t) gives.
+  {
+    const size_t nodes = h->nodes().size();
+    body.interpolateBounds(1.25);
+    std::vector<Node8> only_bounds(body.geometry().nodes, body.geometry().nodes + nodes);
+    body.setTime(0);
+    body.setTime(1.25);
+    CHECK(std::memcmp(only_bounds.data(), body.geometry().nodes, nodes * sizeof(Node8)) == 0);
+  }
+
+  // Coherent queries along a path while the time runs from 0 to the end (the stream's
+  // coherent state must follow the geometry's version).
+  const std::vector<Vec3> path = walk(mesh, h, path_steps, seed + 99);
+  QueryStream coherent(h), front(h), k(h);
+  coherent.setGeometry(&body.geometry());
+  front.setGeometry(&body.geometry());
+  k.setGeometry(&body.geometry());
+  std::vector<TriangleHit> hits;
+  CoherentState state;  // a caller-held compact state, on the k stream's scratch memory
+  for (size_t i = 0; i < path.size(); ++i) {
+    const double t = end * static_cast<double>(i) / static_cast<double>(path.size() - 1);
+    INFO("mesh " << mesh.name << ", path step " << i << ", t = " << num(t) << ", point " << text(path[i]));
+    body.setTime(t);
+    const Mesh now = withPositions(mesh, body.positions());
+    const Checker checker{now, diagonal, 1e-14 * diagonal};
+    const std::vector<BruteHit> truth = bruteForceKClosest(now, path[i], 5);
+    checker.exact(coherent.closestCoherent(path[i]), path[i], truth.front(), checks.coherent);
+    checker.exact(front.closestWithinCoherent(path[i], 0), path[i], truth.front(), checks.front);
+    checker.exact(k.closestCoherent(path[i], state), path[i], truth.front(), checks.state);
+    k.kClosestCoherent(path[i], 5, hits);
+    checker.hits(hits, truth, path[i], checks.k_coherent);
+  }
+}
+
+// ---- Inflated bounds ------------------------------------------------------------------------
+
+// A smooth displacement field scaled so that its largest vertex displacement is `largest`.
+std::vector<Vec3> displacement(const Mesh& mesh, double largest, double phase) {
+  const double diagonal = meshDiagonal(mesh);
+  const Vec3 c = centreOf(mesh);
+  std::vector<Vec3> u(mesh.positions.size());
+  double worst = 0;
+  for (size_t v = 0; v < u.size(); ++v) {
+    const Vec3 x = (mesh.positions[v] - c) / diagonal;
+    u[v] = Vec3(std::sin(7 * x.y() + phase), std::sin(5 * x.z() + 2 * phase), std::cos(6 * x.x() - phase)) +
+           0.5 * Vec3(x.z(), -x.x(), x.y());
+    worst = std::max(worst, u[v].norm());
+  }
+  for (Vec3& x : u) x *= largest / worst;
+  return u;
+}
+
+std::vector<Vec3> add(const std::vector<Vec3>& a, const std::vector<Vec3>& u, double scale = 1) {
+  std::vector<Vec3> out(a.size());
+  for (size_t v = 0; v < a.size(); ++v) out[v] = a[v] + scale * u[v];
+  return out;
+}
+
+void checkBody(const Mesh& rest, const std::shared_ptr<const Hierarchy>& h, const DeformingBody& body, size_t points,
+               uint64_t seed, QueryChecks& checks, Failures& bounds) {
+  const std::string valid = validateGeometry(*h, body.geometry());
+  bounds.check(valid.empty(), [&] { return "bounds not proven: " + valid; });
+  QueryStream stream(h);
+  stream.setGeometry(&body.geometry());
+  const Mesh now = withPositions(rest, body.positions());
+  checkFreshQueries(now, stream, queryPoints(now, points, points / 4 + 1, 2, seed), checks);
+}
+
+void checkInflated(const Mesh& mesh, size_t points, size_t path_steps, uint64_t seed) {
+  const auto h = Hierarchy::build(mesh);
+  const double diagonal = meshDiagonal(mesh);
+  const double delta = 0.01 * diagonal;
+  DeformingBody body(h);
+  QueryChecks checks;
+  Failures bounds("validateGeometry");
+  INFO("mesh " << mesh.name);
+  {
+    INFO("fresh body (rest positions, no inflation)");
+    checkBody(mesh, h, body, points, seed, checks, bounds);
+  }
+
+  body.inflate(delta);
+  CHECK(body.positions() == mesh.positions);
+  std::vector<Vec3> accepted = mesh.positions;
+  for (int step = 0; step < 3; ++step) {
+    INFO("inflate(" << num(delta) << "), displacement step " << step << " (largest 0.99 of the bound)");
+    const std::vector<Vec3> next = add(mesh.positions, displacement(mesh, 0.99 * delta, 0.7 * step));
+    const DisplacementCheck check = body.setPositions(next);
+    CHECK(check.accepted);
+    CHECK(check.worst_vertex == kInvalidIndex);
+    CHECK(check.excess == 0);
+    CHECK(body.positions() == next);
+    accepted = next;
+    checkBody(mesh, h, body, points, seed + 10 + step, checks, bounds);
+  }
+
+  {
+    // Past the bound: refused, reported, nothing changes.
+    const std::vector<Vec3> u = displacement(mesh, 1.5 * delta, 2.0);
+    const std::vector<Vec3> big = add(mesh.positions, u);
+    double expected_excess = -1;
+    for (size_t v = 0; v < big.size(); ++v) expected_excess = std::max(expected_excess, (big[v] - mesh.positions[v]).norm() - delta);
+    INFO("a displacement of 1.5 times the bound");
+    const uint64_t version = body.geometry().version;
+    const DisplacementCheck check = body.setPositions(big);
+    CHECK_FALSE(check.accepted);
+    CHECK(check.worst_vertex < mesh.positions.size());
+    if (check.worst_vertex < mesh.positions.size())
+      CHECK((big[check.worst_vertex] - mesh.positions[check.worst_vertex]).norm() - delta ==
+            Approx(expected_excess).epsilon(1e-12));
+    CHECK(check.excess == Approx(expected_excess).epsilon(1e-12));
+    CHECK(check.excess == Approx(0.5 * delta).epsilon(1e-9));
+    CHECK(body.positions() == accepted);
+    CHECK(body.geometry().version == version);
+    checkBody(mesh, h, body, points, seed + 20, checks, bounds);
+
+    // Inflating more keeps the current positions (they are within the new bounds), then the
+    // same displacement is accepted and exact.
+    body.inflate(1.6 * delta);
+    CHECK(body.positions() == accepted);
+    const DisplacementCheck again = body.setPositions(big);
+    CHECK(again.accepted);
+    CHECK(body.positions() == big);
+    checkBody(mesh, h, body, points, seed + 21, checks, bounds);
+
+    // Shrinking the bounds below the current displacement falls back to the anchor.
+    body.inflate(0.5 * delta);
+    CHECK(body.positions() == body.anchorPositions());
+    checkBody(mesh, h, body, points, seed + 22, checks, bounds);
+
+    // Re-anchoring at the big displacement: exact bounds there, zero displacement bounds.
+    body.anchor(big);
+    CHECK(body.positions() == big);
+    CHECK(body.anchorPositions() == big);
+    checkBody(mesh, h, body, points, seed + 23, checks, bounds);
+    CHECK(body.setPositions(big).accepted);
+    std::vector<Vec3> nudged = big;
+    nudged[7] += Vec3(1e-6 * diagonal, 0, 0);
+    const DisplacementCheck refused = body.setPositions(nudged);
+    CHECK_FALSE(refused.accepted);
+    CHECK(refused.worst_vertex == 7);
+    CHECK(refused.excess == Approx(1e-6 * diagonal).epsilon(1e-6));
+    CHECK(body.positions() == big);
+  }
+
+  {
+    // Per-vertex bounds: only the vertices above the centre move (bounds 0 below); each bound
+    // is its vertex's planned displacement plus a hair.
+    body.anchor(mesh.positions);
+    const Vec3 c = centreOf(mesh);
+    std::vector<Vec3> u = displacement(mesh, 2 * delta, 0.4);
+    std::vector<double> per_vertex(u.size());
+    for (size_t v = 0; v < u.size(); ++v) {
+      if (mesh.positions[v].y() <= c.y()) u[v] = Vec3::Zero();
+      per_vertex[v] = u[v] == Vec3::Zero() ? 0.0 : 1.001 * u[v].norm() + 1e-9 * diagonal;
+    }
+    INFO("per-vertex displacement bounds");
+    body.inflate(per_vertex);
+    const std::vector<Vec3> moved = add(mesh.positions, u);
+    CHECK(body.setPositions(moved).accepted);
+    checkBody(mesh, h, body, points, seed + 30, checks, bounds);
+    // A vertex with bound 0 that moves is refused.
+    VertexIndex still = kInvalidIndex;
+    for (size_t v = 0; v < u.size() && still == kInvalidIndex; ++v)
+      if (per_vertex[v] == 0 && !mesh.triangles.empty()) still = static_cast<VertexIndex>(v);
+    REQUIRE(still != kInvalidIndex);
+    std::vector<Vec3> bad = moved;
+    bad[still] += Vec3(0, 0, 1e-3 * diagonal);
+    const DisplacementCheck check = body.setPositions(bad);
+    CHECK_FALSE(check.accepted);
+    CHECK(check.worst_vertex == still);
+    CHECK(check.excess == Approx(1e-3 * diagonal).epsilon(1e-9));
+    CHECK(body.positions() == moved);
+  }
+
+  {
+    // Coherent queries while the body deforms within its bounds every step.
+    body.anchor(mesh.positions);
+    body.inflate(delta);
+    const std::vector<Vec3> path = walk(mesh, h, path_steps, seed + 40);
+    QueryStream coherent(h), front(h);
+    coherent.setGeometry(&body.geometry());
+    front.setGeometry(&body.geometry());
+    Failures coherent_f("closestCoherent on a deforming body"), front_f("closestWithinCoherent on a deforming body");
+    for (size_t i = 0; i < path.size(); ++i) {
+      const double amount = 0.9 * delta * std::sin(0.03 * static_cast<double>(i));
+      const std::vector<Vec3> next = add(mesh.positions, displacement(mesh, std::abs(amount), 0.01 * static_cast<double>(i)));
+      INFO("path step " << i << ", point " << text(path[i]));
+      REQUIRE(body.setPositions(next).accepted);
+      const Mesh now = withPositions(mesh, next);
+      const Checker checker{now, diagonal, 1e-14 * diagonal};
+      const BruteHit truth = bruteForceClosest(now, path[i]);
+      checker.exact(coherent.closestCoherent(path[i]), path[i], truth, coherent_f);
+      checker.exact(front.closestWithinCoherent(path[i], 0), path[i], truth, front_f);
+    }
+  }
+}
+
+}  // namespace
+
+TEST_CASE("rigid bodies: random poses every step", "[deform][rigid]") {
+  const Mesh* armadillo = realMesh("armadillo");
+  REQUIRE(armadillo);
+  checkRigid(*armadillo, 120, 0xd0d0);
+  checkRigid(scenes::torus(1.0, 0.3, 64, 32), 300, 0xd0d1);
+  checkRigid(scenes::randomSoup(2000, 3), 300, 0xd0d2);
+}
+
+TEST_CASE("rigid bodies: non-rigid poses throw", "[deform][rigid]") {
+  const auto h = Hierarchy::build(scenes::icosphere(2));
+  Eigen::Isometry3d scaled = Eigen::Isometry3d::Identity();
+  scaled.linear() *= 1.01;
+  Eigen::Isometry3d shear = Eigen::Isometry3d::Identity();
+  shear.linear()(0, 1) = 0.01;
+  Eigen::Isometry3d mirror = Eigen::Isometry3d::Identity();
+  mirror.linear()(2, 2) = -1;
+  Eigen::Isometry3d nan_translation = Eigen::Isometry3d::Identity();
+  nan_translation.translation().x() = std::numeric_limits<double>::quiet_NaN();
+  Eigen::Isometry3d inf_rotation = Eigen::Isometry3d::Identity();
+  inf_rotation.linear()(1, 1) = std::numeric_limits<double>::infinity();
+  Eigen::Isometry3d good = Eigen::Isometry3d::Identity();
+  good.linear() = Eigen::AngleAxisd(0.7, Vec3(1, 2, 3).normalized()).toRotationMatrix();
+  good.translation() = Vec3(1, -2, 3);
+  RigidBody body(h, good);
+  for (const auto& [name, pose] : std::vector<std::pair<const char*, Eigen::Isometry3d>>{
+           {"scale 1.01", scaled}, {"shear", shear}, {"mirror", mirror}, {"NaN translation", nan_translation},
+           {"infinite rotation entry", inf_rotation}}) {
+    INFO("pose: " << name);
+    CHECK_THROWS_AS(RigidBody(h, pose), std::invalid_argument);
+    CHECK_THROWS_AS(body.setPose(pose), std::invalid_argument);
+    CHECK(body.pose().matrix() == good.matrix());  // a refused pose changes nothing
+  }
+}
+
+TEST_CASE("key frames: bounds proven and queries exact at every time", "[deform][keyframe]") {
+  const Mesh* armadillo = realMesh("armadillo");
+  REQUIRE(armadillo);
+  checkKeyframes(*armadillo, 4, 12, 120, 0xfeed01);
+  checkKeyframes(*armadillo, 2, 8, 60, 0xfeed02);
+  const Mesh torus = scenes::torus(1.0, 0.3, 96, 48);
+  checkKeyframes(torus, 3, 30, 300, 0xfeed03);
+  checkKeyframes(torus, 2, 30, 150, 0xfeed04);
+}
+
+TEST_CASE("key frames: one frame", "[deform][keyframe]") {
+  const Mesh mesh = scenes::torus(1.0, 0.3, 48, 24);
+  const auto h = Hierarchy::build(mesh);
+  KeyframeBody body(h, std::vector<std::vector<Vec3>>{wave(mesh, 0.05, 2, Vec3(0, 0, 1), 0.5)});
+  const Mesh now = withPositions(mesh, wave(mesh, 0.05, 2, Vec3(0, 0, 1), 0.5));
+  QueryStream stream(h);
+  stream.setGeometry(&body.geometry());
+  QueryChecks checks;
+  for (double t : {0.0, 0.5, 1.0, 5.0, -1.0}) {
+    INFO("one key frame, t = " << t);
+    body.setTime(t);
+    CHECK(body.time() == 0);
+    CHECK(body.positions() == now.positions);
+    CHECK(validateGeometry(*h, body.geometry()) == "");
+    checkFreshQueries(now, stream, queryPoints(now, 40, 10, 4, 11), checks);
+  }
+}
+
+TEST_CASE("key frames: bad frames throw", "[deform][keyframe]") {
+  const Mesh mesh = scenes::icosphere(2);
+  const auto h = Hierarchy::build(mesh);
+  std::vector<Vec3> short_frame(mesh.positions.begin(), mesh.positions.end() - 1);
+  std::vector<Vec3> nan_frame = mesh.positions;
+  nan_frame[5].y() = std::numeric_limits<double>::quiet_NaN();
+  std::vector<Vec3> inf_frame = mesh.positions;
+  inf_frame[0].z() = -std::numeric_limits<double>::infinity();
+  std::vector<Vec3> long_frame = mesh.positions;
+  long_frame.push_back(Vec3::Zero());
+  using Frames = std::vector<std::vector<Vec3>>;
+  CHECK_THROWS_AS(KeyframeBody(h, Frames()), std::invalid_argument);
+  CHECK_THROWS_AS((KeyframeBody(h, Frames{mesh.positions, short_frame})), std::invalid_argument);
+  CHECK_THROWS_AS(KeyframeBody(h, Frames{long_frame}), std::invalid_argument);
+  CHECK_THROWS_AS((KeyframeBody(h, Frames{mesh.positions, nan_frame, mesh.positions})), std::invalid_argument);
+  CHECK_THROWS_AS(KeyframeBody(h, Frames{inf_frame}), std::invalid_argument);
+  CHECK_NOTHROW((KeyframeBody(h, Frames{mesh.positions, mesh.positions})));
+}
+
+TEST_CASE("inflated bounds: displacements within the bounds are exact, others refused", "[deform][inflated]") {
+  const Mesh* armadillo = realMesh("armadillo");
+  REQUIRE(armadillo);
+  checkInflated(*armadillo, 10, 80, 0xbeef01);
+  checkInflated(scenes::torus(1.0, 0.3, 96, 48), 30, 200, 0xbeef02);
+  checkInflated(scenes::randomSoup(2000, 9), 30, 200, 0xbeef03);
+}
+
+TEST_CASE("inflated bounds: bad input throws and changes nothing", "[deform][inflated]") {
+  const Mesh mesh = scenes::icosphere(2);
+  const auto h = Hierarchy::build(mesh);
+  DeformingBody body(h);
+  body.inflate(0.05);
+  const size_t n = mesh.positions.size();
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  const double inf = std::numeric_limits<double>::infinity();
+  CHECK_THROWS_AS(body.inflate(-1e-9), std::invalid_argument);
+  CHECK_THROWS_AS(body.inflate(nan), std::invalid_argument);
+  CHECK_THROWS_AS(body.inflate(inf), std::invalid_argument);
+  CHECK_THROWS_AS(body.inflate(std::vector<double>(n - 1, 0.1)), std::invalid_argument);
+  CHECK_THROWS_AS(body.inflate(std::vector<double>(n + 1, 0.1)), std::invalid_argument);
+  std::vector<double> one_negative(n, 0.1);
+  one_negative[3] = -0.1;
+  CHECK_THROWS_AS(body.inflate(one_negative), std::invalid_argument);
+  std::vector<double> one_nan(n, 0.1);
+  one_nan[n - 1] = nan;
+  CHECK_THROWS_AS(body.inflate(one_nan), std::invalid_argument);
+
+  std::vector<Vec3> moved = mesh.positions;
+  for (Vec3& x : moved) x *= 1.01;
+  CHECK(body.setPositions(moved).accepted);
+  CHECK_THROWS_AS(body.setPositions(std::vector<Vec3>(n - 1, Vec3::Zero())), std::invalid_argument);
+  std::vector<Vec3> nan_positions = moved;
+  nan_positions[2].x() = nan;
+  CHECK_THROWS_AS(body.setPositions(nan_positions), std::invalid_argument);
+  std::vector<Vec3> inf_positions = moved;
+  inf_positions[2].z() = inf;
+  CHECK_THROWS_AS(body.setPositions(inf_positions), std::invalid_argument);
+  CHECK_THROWS_AS(body.anchor(std::vector<Vec3>(n + 1, Vec3::Zero())), std::invalid_argument);
+  CHECK_THROWS_AS(body.anchor(nan_positions), std::invalid_argument);
+  // Nothing changed: the accepted positions, valid bounds, exact queries.
+  CHECK(body.positions() == moved);
+  CHECK(body.anchorPositions() == mesh.positions);
+  CHECK(validateGeometry(*h, body.geometry()) == "");
+  QueryStream stream(h);
+  stream.setGeometry(&body.geometry());
+  QueryChecks checks;
+  const Mesh now = withPositions(mesh, moved);
+  checkFreshQueries(now, stream, queryPoints(now, 40, 10, 4, 5), checks);
+}
