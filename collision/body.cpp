@@ -1,0 +1,215 @@
+// Shared per-mesh tables of the distance service: topology, closedness, pseudonormals
+// (Baerentzen & Aanaes 2005; see body.h).
+#include "collision/body.h"
+
+#include <algorithm>
+#include <cmath>
+#include <stdexcept>
+
+namespace meshsweeper {
+namespace {
+
+// The angle of triangle (a, b, c) at corner a, robust for short edges (atan2, not acos).
+double cornerAngle(const Vec3& a, const Vec3& b, const Vec3& c) {
+  const Vec3 u = b - a, v = c - a;
+  return std::atan2(u.cross(v).norm(), u.dot(v));
+}
+
+// True when corner c holds a vertex that no earlier corner of t holds (a face with a repeated
+// index lists the vertex once).
+bool firstOccurrence(const Triangle& t, int c) {
+  return c == 0 || (c == 1 && t[1] != t[0]) || (c == 2 && t[2] != t[0] && t[2] != t[1]);
+}
+
+Vec3 vertexPseudonormal(const Mesh& mesh, const Vec3* positions, VertexIndex vertex,
+                        const TriangleIndex* faces_begin, const TriangleIndex* faces_end) {
+  Vec3 sum = Vec3::Zero();
+  for (const TriangleIndex* f = faces_begin; f != faces_end; ++f) {
+    const Triangle& t = mesh.triangles[*f];
+    for (int c = 0; c < 3; ++c) {
+      if (t[c] != vertex) continue;
+      const Vec3& a = positions[t[c]];
+      const Vec3& b = positions[t[(c + 1) % 3]];
+      const Vec3& d = positions[t[(c + 2) % 3]];
+      sum += cornerAngle(a, b, d) * unitFaceNormal(positions[t[0]], positions[t[1]], positions[t[2]]);
+    }
+  }
+  return sum;
+}
+
+}  // namespace
+
+Vec3 unitFaceNormal(const Vec3& a, const Vec3& b, const Vec3& c) {
+  const Vec3 n = (b - a).cross(c - a);
+  const double length = n.norm();
+  return length > 0 ? Vec3(n / length) : Vec3::Zero();
+}
+
+int featureCorner(Feature feature) {
+  switch (feature) {
+    case Feature::kVertex0: return 0;
+    case Feature::kVertex1: return 1;
+    case Feature::kVertex2: return 2;
+    case Feature::kEdge01: return 0;
+    case Feature::kEdge12: return 1;
+    case Feature::kEdge20: return 2;
+    case Feature::kFace: return -1;
+  }
+  return -1;
+}
+
+std::shared_ptr<const BodyShape> BodyShape::build(std::shared_ptr<const Hierarchy> hierarchy) {
+  if (!hierarchy) throw std::invalid_argument("BodyShape: null hierarchy");
+  std::shared_ptr<BodyShape> shape(new BodyShape());
+  shape->hierarchy_ = std::move(hierarchy);
+  const Mesh& mesh = shape->hierarchy_->mesh();
+  const size_t vertex_count = mesh.positions.size();
+  const size_t face_count = mesh.triangles.size();
+  meshBounds(mesh, shape->rest_lower_, shape->rest_upper_);
+
+  // [vertex] incident faces, CSR.
+  auto& begin = shape->vertex_face_begin_;
+  begin.assign(vertex_count + 1, 0);
+  for (const Triangle& t : mesh.triangles)
+    for (int c = 0; c < 3; ++c)
+      if (firstOccurrence(t, c)) ++begin[t[c] + 1];
+  for (size_t v = 0; v < vertex_count; ++v) begin[v + 1] += begin[v];
+  shape->vertex_faces_.resize(begin[vertex_count]);
+  {
+    std::vector<uint32_t> fill(begin.begin(), begin.end() - 1);
+    for (size_t f = 0; f < face_count; ++f) {
+      const Triangle& t = mesh.triangles[f];
+      for (int c = 0; c < 3; ++c)
+        if (firstOccurrence(t, c)) shape->vertex_faces_[fill[t[c]]++] = static_cast<TriangleIndex>(f);
+    }
+  }
+
+  // Edges: sort (min, max, directed?) records; a closed edge has exactly two, opposite.
+  struct EdgeRecord {
+    VertexIndex lo, hi;
+    uint32_t half;   // 3 * face + edge
+    bool forward;    // lo -> hi in the face's orientation
+  };
+  std::vector<EdgeRecord> edges;
+  edges.reserve(3 * face_count);
+  std::string reason;
+  for (size_t f = 0; f < face_count; ++f) {
+    const Triangle& t = mesh.triangles[f];
+    if (t[0] == t[1] || t[1] == t[2] || t[2] == t[0]) {
+      if (reason.empty()) reason = "face " + std::to_string(f) + " repeats a vertex";
+      continue;
+    }
+    for (int k = 0; k < 3; ++k) {
+      const VertexIndex a = t[k], b = t[(k + 1) % 3];
+      edges.push_back({std::min(a, b), std::max(a, b), static_cast<uint32_t>(3 * f + k), a < b});
+    }
+  }
+  std::sort(edges.begin(), edges.end(), [](const EdgeRecord& x, const EdgeRecord& y) {
+    return x.lo != y.lo ? x.lo < y.lo : x.hi != y.hi ? x.hi < y.hi : x.half < y.half;
+  });
+  shape->edge_neighbor_.assign(3 * face_count, kInvalidIndex);
+  for (size_t i = 0; i < edges.size();) {
+    size_t j = i + 1;
+    while (j < edges.size() && edges[j].lo == edges[i].lo && edges[j].hi == edges[i].hi) ++j;
+    if (j - i == 2) {
+      shape->edge_neighbor_[edges[i].half] = edges[i + 1].half / 3;
+      shape->edge_neighbor_[edges[i + 1].half] = edges[i].half / 3;
+      if (edges[i].forward == edges[i + 1].forward && reason.empty())
+        reason = "faces " + std::to_string(edges[i].half / 3) + " and " +
+                 std::to_string(edges[i + 1].half / 3) + " are oriented inconsistently";
+    } else if (reason.empty()) {
+      reason = "edge (" + std::to_string(edges[i].lo) + ", " + std::to_string(edges[i].hi) + ") has " +
+               std::to_string(j - i) + (j - i == 1 ? " face (boundary)" : " faces (non-manifold)");
+    }
+    i = j;
+  }
+
+  // Every vertex's faces must form one fan (else two surfaces touch at the vertex).
+  if (reason.empty()) {
+    std::vector<TriangleIndex> stack;
+    std::vector<TriangleIndex> seen;
+    for (VertexIndex v = 0; v < vertex_count && reason.empty(); ++v) {
+      const uint32_t first = begin[v], last = begin[v + 1];
+      if (first == last) continue;
+      seen.assign(1, shape->vertex_faces_[first]);
+      stack.assign(1, shape->vertex_faces_[first]);
+      while (!stack.empty()) {
+        const TriangleIndex f = stack.back();
+        stack.pop_back();
+        const Triangle& t = mesh.triangles[f];
+        const int c = t[0] == v ? 0 : t[1] == v ? 1 : 2;
+        for (int k : {c, (c + 2) % 3}) {  // the two edges of f that hold v
+          const TriangleIndex g = shape->edge_neighbor_[3 * f + k];
+          if (g != kInvalidIndex && std::find(seen.begin(), seen.end(), g) == seen.end()) {
+            seen.push_back(g);
+            stack.push_back(g);
+          }
+        }
+      }
+      if (seen.size() != last - first)
+        reason = "vertex " + std::to_string(v) + " joins several fans of faces (non-manifold vertex)";
+    }
+  }
+
+  // Rest pseudonormals. A zero-area face has no normal: its pseudonormals would not decide the
+  // sign, so a mesh with one is treated as open (unsigned answers, never a wrong sign).
+  const auto& pos = mesh.positions;
+  shape->face_normals_.resize(face_count);
+  for (size_t f = 0; f < face_count; ++f) {
+    const Triangle& t = mesh.triangles[f];
+    shape->face_normals_[f] = unitFaceNormal(pos[t[0]], pos[t[1]], pos[t[2]]);
+    if (reason.empty() && shape->face_normals_[f].squaredNorm() == 0)
+      reason = "face " + std::to_string(f) + " has zero area";
+  }
+  shape->closed_ = reason.empty();
+  shape->open_reason_ = reason;
+  shape->edge_normals_.resize(3 * face_count);
+  for (size_t h = 0; h < 3 * face_count; ++h) {
+    const TriangleIndex g = shape->edge_neighbor_[h];
+    shape->edge_normals_[h] = shape->face_normals_[h / 3] +
+                              (g != kInvalidIndex ? shape->face_normals_[g] : Vec3::Zero());
+  }
+  shape->vertex_normals_.assign(vertex_count, Vec3::Zero());
+  for (size_t f = 0; f < face_count; ++f) {
+    const Triangle& t = mesh.triangles[f];
+    if (t[0] == t[1] || t[1] == t[2] || t[2] == t[0]) continue;
+    for (int c = 0; c < 3; ++c)
+      shape->vertex_normals_[t[c]] +=
+          cornerAngle(pos[t[c]], pos[t[(c + 1) % 3]], pos[t[(c + 2) % 3]]) * shape->face_normals_[f];
+  }
+  return shape;
+}
+
+Vec3 BodyShape::restPseudonormal(TriangleIndex triangle, Feature feature) const {
+  if (feature == Feature::kFace) return face_normals_[triangle];
+  const int corner = featureCorner(feature);
+  if (isEdgeFeature(feature)) return edge_normals_[3 * triangle + corner];
+  return vertex_normals_[mesh().triangles[triangle][corner]];
+}
+
+Vec3 BodyShape::pseudonormal(TriangleIndex triangle, Feature feature, const Vec3* positions) const {
+  const Mesh& m = mesh();
+  const Triangle& t = m.triangles[triangle];
+  if (feature == Feature::kFace) return unitFaceNormal(positions[t[0]], positions[t[1]], positions[t[2]]);
+  const int corner = featureCorner(feature);
+  if (isEdgeFeature(feature)) {
+    Vec3 n = unitFaceNormal(positions[t[0]], positions[t[1]], positions[t[2]]);
+    const TriangleIndex g = edge_neighbor_[3 * triangle + corner];
+    if (g != kInvalidIndex) {
+      const Triangle& u = m.triangles[g];
+      n += unitFaceNormal(positions[u[0]], positions[u[1]], positions[u[2]]);
+    }
+    return n;
+  }
+  const VertexIndex v = t[corner];
+  return vertexPseudonormal(m, positions, v, vertex_faces_.data() + vertex_face_begin_[v],
+                            vertex_faces_.data() + vertex_face_begin_[v + 1]);
+}
+
+size_t BodyShape::bytes() const {
+  return vertex_face_begin_.size() * sizeof(uint32_t) + vertex_faces_.size() * sizeof(TriangleIndex) +
+         edge_neighbor_.size() * sizeof(TriangleIndex) +
+         (face_normals_.size() + edge_normals_.size() + vertex_normals_.size()) * sizeof(Vec3);
+}
+
+}  // namespace meshsweeper

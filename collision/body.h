@@ -1,0 +1,93 @@
+#pragma once
+// The fixed, shared part of a body of the distance service (collision/): what a body's mesh
+// needs besides its hierarchy, built once per mesh and shared read-only by every body that
+// uses the mesh, like the hierarchy itself (STYLE.md: fixed, shared lifetime).
+//
+//  - Surface topology: [vertex] incident faces (CSR), [triangle edge] the face across the edge,
+//    and whether the mesh is closed (every edge has exactly two faces, used in opposite
+//    directions; every vertex's faces form one fan; no face repeats a vertex or has zero area
+//    at the rest positions). Only closed bodies get a sign (inside/outside); the sign of a
+//    deformed closed body assumes the deformation keeps it free of self-intersections and
+//    zero-area faces (the pseudonormal test's precondition).
+//  - Angle-weighted pseudonormals at the rest positions (Baerentzen & Aanaes, "Signed distance
+//    computation using the angle weighted pseudonormal", IEEE TVCG 2005): the face normal; for
+//    an edge the sum of its two unit face normals; for a vertex the sum of the unit normals of
+//    its faces, each weighted by the face's angle at the vertex. For a closed surface and a
+//    point p with closest surface point c on feature f, sign((p - c) . n_f) is the sign of the
+//    distance (outside positive). Deformed positions use the same formulas on demand
+//    (pseudonormal()): only the hit's feature is evaluated.
+#include "core/hierarchy.h"
+#include "core/triangle_distance.h"
+
+#include <memory>
+#include <string>
+#include <vector>
+
+namespace meshsweeper {
+
+class BodyShape {
+ public:
+  // Builds the tables of hierarchy->mesh(). Throws std::invalid_argument if hierarchy is null.
+  // Costs O(faces log faces) (an edge sort); the hierarchy is kept alive by the shape.
+  static std::shared_ptr<const BodyShape> build(std::shared_ptr<const Hierarchy> hierarchy);
+
+  const std::shared_ptr<const Hierarchy>& hierarchy() const { return hierarchy_; }
+  const Mesh& mesh() const { return hierarchy_->mesh(); }
+
+  // True when the distance to this mesh can be signed (see the file comment).
+  bool closed() const { return closed_; }
+  // Why the mesh is not closed (the first problem found), "" when closed.
+  const std::string& openReason() const { return open_reason_; }
+
+  // Box of the vertices used by faces, at the rest positions.
+  const Vec3& restLower() const { return rest_lower_; }
+  const Vec3& restUpper() const { return rest_upper_; }
+
+  // [vertex + 1] CSR into vertexFaces(): the faces using each vertex, by increasing index.
+  const std::vector<uint32_t>& vertexFaceBegin() const { return vertex_face_begin_; }
+  const std::vector<TriangleIndex>& vertexFaces() const { return vertex_faces_; }
+  // [3 * triangle + edge] the face across edge `edge` (corners edge, edge + 1 mod 3), or
+  // kInvalidIndex on a boundary or non-manifold edge.
+  const std::vector<TriangleIndex>& edgeNeighbor() const { return edge_neighbor_; }
+
+  // Rest pseudonormals: [triangle] unit face normal (zero for a zero-area face);
+  // [3 * triangle + edge] edge pseudonormal; [vertex] vertex pseudonormal. Not normalised
+  // except the face normals; only their directions matter.
+  const std::vector<Vec3>& restFaceNormals() const { return face_normals_; }
+  const std::vector<Vec3>& restEdgeNormals() const { return edge_normals_; }
+  const std::vector<Vec3>& restVertexNormals() const { return vertex_normals_; }
+
+  // The pseudonormal of `feature` of `triangle` at the rest positions (table look-up).
+  Vec3 restPseudonormal(TriangleIndex triangle, Feature feature) const;
+  // The same at other positions ([vertex], as many as the mesh has, same connectivity),
+  // computed from the feature's faces only. Equals restPseudonormal() at the rest positions
+  // up to rounding.
+  Vec3 pseudonormal(TriangleIndex triangle, Feature feature, const Vec3* positions) const;
+
+  // Memory of the tables in bytes (not counting the hierarchy).
+  size_t bytes() const;
+
+ private:
+  BodyShape() = default;
+  std::shared_ptr<const Hierarchy> hierarchy_;
+  bool closed_ = false;
+  std::string open_reason_;
+  Vec3 rest_lower_ = Vec3::Zero(), rest_upper_ = Vec3::Zero();
+  std::vector<uint32_t> vertex_face_begin_;    // [vertex + 1]
+  std::vector<TriangleIndex> vertex_faces_;    // CSR
+  std::vector<TriangleIndex> edge_neighbor_;   // [3 * triangle + edge]
+  std::vector<Vec3> face_normals_;             // [triangle]
+  std::vector<Vec3> edge_normals_;             // [3 * triangle + edge]
+  std::vector<Vec3> vertex_normals_;           // [vertex]
+};
+
+// The unit normal of triangle (a, b, c) (right-hand rule), zero when its area is zero.
+Vec3 unitFaceNormal(const Vec3& a, const Vec3& b, const Vec3& c);
+
+// The corner (0, 1, 2) of a vertex feature, or the first corner of an edge feature
+// (kEdge01 -> 0, kEdge12 -> 1, kEdge20 -> 2); -1 for kFace.
+int featureCorner(Feature feature);
+inline bool isVertexFeature(Feature f) { return f <= Feature::kVertex2; }
+inline bool isEdgeFeature(Feature f) { return f >= Feature::kEdge01 && f <= Feature::kEdge20; }
+
+}  // namespace meshsweeper

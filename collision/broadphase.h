@@ -1,0 +1,67 @@
+#pragma once
+// Broadphase of the distance service: which bodies a query point can reach.
+//
+// A body is a candidate of point p for the query distance d when the Euclidean distance from p
+// to the body's world box is at most d (the box inflated by d, rounded corners); the box holds
+// every point of the body's surface, so no body with a triangle within d is ever left out.
+//
+// Layout: a flat structure-of-arrays loop over all body boxes (lower/upper x, y, z in six
+// contiguous double arrays, padded to a multiple of 4 with empty boxes), four boxes per AVX
+// instruction, a bit mask compacted into the candidate list. Measured with
+// `bench_service --broadphase` (bench/README.md): 4-17 ns per point for 1-16 bodies, against
+// 8-30 ns for a uniform grid over the bodies and 9-55 ns for the scalar reference; at 64 bodies
+// both are ~30-37 ns. Every step queries each point against its candidates at ~0.3-1 us per
+// pair, so the broadphase is 1-2% of a step. The flat loop has no build cost (bodies move every
+// step), no cell-size parameter, and its cost does not depend on where points fall; a grid or
+// a tree over the bodies pays off only beyond ~64 bodies.
+// BroadphaseReference answers the same question box by box (array of structures, scalar) for
+// the tests.
+#include "core/types.h"
+
+#include <cstddef>
+#include <cstdint>
+#include <vector>
+
+namespace meshsweeper {
+
+// An axis-aligned box; lower > upper on some axis means empty (reaches no point).
+struct Box3 {
+  Vec3 lower = Vec3::Constant(1);
+  Vec3 upper = Vec3::Constant(-1);
+  bool empty() const { return (lower.array() > upper.array()).any(); }
+};
+
+class Broadphase {
+ public:
+  // Sets the number of slots (bodies, by slot index); new slots are empty.
+  void resize(size_t slots);
+  size_t size() const { return slots_; }
+  // Sets slot `slot`'s world box (an empty box to switch the slot off). Precondition:
+  // slot < size(); box coordinates are not NaN.
+  void set(size_t slot, const Box3& box);
+  Box3 box(size_t slot) const;
+
+  // Writes to out[0..n) the slots whose box is within distance `distance` of p, by increasing
+  // slot, and returns n. distance may be +infinity (every non-empty slot). out must hold
+  // size() entries. Preconditions: p finite; distance >= 0.
+  size_t candidates(const Vec3& p, double distance, uint32_t* out) const;
+
+ private:
+  size_t slots_ = 0;
+  // [axis][slot] padded to a multiple of 4; empty slots hold lower = +inf, upper = -inf.
+  std::vector<double> lower_[3], upper_[3];
+};
+
+// The reference: the same answer, one box at a time.
+class BroadphaseReference {
+ public:
+  std::vector<Box3> boxes;  // [slot]
+  size_t candidates(const Vec3& p, double distance, uint32_t* out) const;
+};
+
+// The comparison both use: true when the squared distance from p to the box (computed in double)
+// is at most distance^2, with a relative slack of 1e-12 that covers the rounding of the box
+// distance, so a body at exactly `distance` is never dropped. Empty boxes: false.
+bool boxWithin(const Box3& box, const Vec3& p, double distance);
+
+}  // namespace meshsweeper

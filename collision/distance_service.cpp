@@ -1,0 +1,768 @@
+// The distance-query service (DESIGN.md section 5; moving and deforming bodies: paper section 5,
+// DESIGN.md section 3; signs: Baerentzen & Aanaes 2005).
+//
+// step(points, d, mode):
+//   refresh the world box of every body changed since the last step (parallel over bodies)
+//   parallel over fixed blocks of block_size points (one task per block, any thread):
+//     for each point p of the block:
+//       candidates <- the bodies whose world box is within d of p (flat SoA loop)
+//     closest mode: the block's pair states are reused in place when every point has the same
+//       candidates (slot and generation) as last step; else rebuilt: a pair found last step
+//       keeps its state, a new pair starts cold, a pair not reached any more is dropped
+//     for each point p, for each candidate body b (by slot):
+//       q <- p in b's frame (rigid: the inverse pose; key-framed and deforming: p itself, the
+//            thread's stream for b reads b's current TreeGeometry)
+//       closest: skip the pair if it provably cannot reach d (rigid: the last distance minus
+//                the motion since; else the tree's boxes, unless the last face is within d);
+//                c <- stream.closestCoherent(q, pair state); keep the smallest c.distance <= d
+//       within:  every triangle within d (stream.within)
+//     hits: world point and direction, sign from the pseudonormal at the closest feature
+//   within mode: the blocks' hits are concatenated in block order
+// Every point writes only its own result slots and its own pair states, and no answer depends
+// on the stream (scratch only) that computes it, so the thread count never changes a result.
+#include "collision/distance_service.h"
+
+#include "core/triangle_distance.h"
+#include "deform/inflated_bounds.h"
+#include "deform/keyframe_bounds.h"
+#include "deform/rigid_body.h"
+
+#include <tbb/blocked_range.h>
+#include <tbb/enumerable_thread_specific.h>
+#include <tbb/parallel_for.h>
+#include <tbb/task_arena.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <limits>
+#include <map>
+#include <stdexcept>
+#include <string>
+#include <unordered_map>
+
+namespace meshsweeper {
+namespace {
+
+constexpr double kInf = std::numeric_limits<double>::infinity();
+
+double secondsSince(std::chrono::steady_clock::time_point start) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+}
+
+const char* kindName(BodyKind kind) {
+  switch (kind) {
+    case BodyKind::kRigid: return "rigid";
+    case BodyKind::kKeyframed: return "key-framed";
+    case BodyKind::kDeforming: return "deforming";
+  }
+  return "?";
+}
+
+// The coherent state of one (point, body) pair.
+struct PairState {
+  uint32_t slot = 0;
+  uint32_t generation = 0;
+  double last_distance = 0;  // exact distance at state.last_point (when state.last_face is set)
+  CoherentState state = CoherentState();  // value-initialised: a cold start, faces zeroed
+};
+
+// False only if no triangle of the geometry can be within distance d of q (body frame): every
+// leaf slot's box is farther than d. Depth-first over the slot boxes, stopping at the first leaf
+// slot within d. The float boxes hold (x - center) * box_scale rounded outward, so the distance
+// from the double-scaled point to a box, computed in double with a relative slack, bounds the
+// distance to every face below it from below (query-point rounding plays no part).
+bool treeMayReach(const TreeGeometry& g, const Vec3& q, double d) {
+  const Vec3 s = (q - g.center) * g.box_scale;
+  const double ds = d * g.box_scale;
+  const double limit = std::min(ds * ds * (1 + 1e-12), std::numeric_limits<double>::max());
+  constexpr int kStack = 128;
+  int32_t stack[kStack];
+  int top = 0;
+  stack[top++] = 0;
+  while (top > 0) {
+    const Node8& n = g.nodes[stack[--top]];
+    for (int k = 0; k < 8; ++k) {
+      const ChildRef child = n.child[k];
+      if (child == kEmptyChild) continue;
+      double d2 = 0;
+      for (int axis = 0; axis < 3; ++axis) {
+        const double gap = std::max(std::max(static_cast<double>(n.lower[axis][k]) - s[axis],
+                                             s[axis] - static_cast<double>(n.upper[axis][k])), 0.0);
+        d2 += gap * gap;
+      }
+      if (!(d2 <= limit)) continue;
+      if (isLeafRef(child) || top == kStack) return true;
+      stack[top++] = child;
+    }
+  }
+  return false;
+}
+
+// The pair states of one block of points: [local point + 1] CSR into pairs, by increasing slot.
+struct BlockStates {
+  uint32_t points = 0;
+  std::vector<uint32_t> begin;
+  std::vector<PairState> pairs;
+};
+
+struct Body {
+  bool alive = false;
+  uint32_t generation = 0;
+  BodyKind kind = BodyKind::kRigid;
+  std::shared_ptr<const BodyShape> shape;
+  std::unique_ptr<RigidBody> rigid;
+  std::unique_ptr<KeyframeBody> keyframed;
+  std::unique_ptr<DeformingBody> deforming;
+  double displacement_bound = 0;
+  TreeGeometry rest;  // the hierarchy's rest geometry (rigid bodies, in the body frame)
+  Box3 box;
+  bool box_dirty = true;
+
+  // What the body's streams read: null (rest geometry, body frame) for rigid bodies.
+  const TreeGeometry* geometry() const {
+    if (keyframed) return &keyframed->geometry();
+    if (deforming) return &deforming->geometry();
+    return nullptr;
+  }
+  const TreeGeometry& treeGeometry() const { return geometry() ? *geometry() : rest; }
+  const Vec3* positions() const {
+    if (keyframed) return keyframed->positions().data();
+    if (deforming) return deforming->positions().data();
+    return shape->mesh().positions.data();
+  }
+};
+
+struct StreamSlot {
+  uint32_t generation = 0;
+  std::unique_ptr<QueryStream> stream;
+};
+
+// Per-thread scratch: one stream per body slot, candidate lists, rebuild buffers.
+struct Scratch {
+  std::vector<StreamSlot> streams;      // [slot]
+  std::vector<uint32_t> candidates;     // [local point * slots + k]
+  std::vector<uint32_t> candidate_count;  // [local point]
+  std::vector<uint32_t> begin;          // rebuilt CSR of a block
+  std::vector<PairState> pairs;
+  std::vector<TriangleHit> triangle_hits;
+  std::vector<DistanceHit> point_hits;
+};
+
+struct MeshCacheEntry {
+  std::shared_ptr<const Hierarchy> hierarchy;
+  const Vec3* positions = nullptr;
+  const Triangle* triangles = nullptr;
+  size_t vertex_count = 0, triangle_count = 0;
+};
+
+bool hitOrder(const DistanceHit& a, const DistanceHit& b) {
+  if (a.distance != b.distance) return a.distance < b.distance;
+  if (a.body.index != b.body.index) return a.body.index < b.body.index;
+  return a.triangle < b.triangle;
+}
+
+}  // namespace
+
+struct DistanceService::Impl {
+  ServiceOptions options;
+  unsigned threads = 0;
+  std::unique_ptr<tbb::task_arena> arena;
+  std::vector<Body> bodies;         // [slot]
+  std::vector<uint32_t> free_slots;
+  size_t live = 0;
+  Broadphase broadphase;
+  std::map<const Mesh*, MeshCacheEntry> mesh_cache;
+  std::unordered_map<const Hierarchy*, std::weak_ptr<const BodyShape>> shapes;
+  std::vector<BlockStates> blocks;                 // [block] closest-mode pair states
+  std::vector<StepStats> block_stats;              // [block]
+  std::vector<std::vector<DistanceHit>> block_hits;  // [block] within mode
+  std::vector<Vec3> positions_scratch;
+  tbb::enumerable_thread_specific<Scratch> scratch;
+
+  Body& body(BodyHandle h, const char* what) {
+    if (h.index >= bodies.size() || !bodies[h.index].alive || bodies[h.index].generation != h.generation)
+      throw std::invalid_argument(std::string("DistanceService::") + what + ": stale body handle (slot " +
+                                  (h.index == kInvalidIndex ? std::string("none") : std::to_string(h.index)) +
+                                  ", generation " + std::to_string(h.generation) + ")");
+    return bodies[h.index];
+  }
+  Body& body(BodyHandle h, const char* what, BodyKind kind) {
+    Body& b = body(h, what);
+    if (b.kind != kind)
+      throw std::invalid_argument(std::string("DistanceService::") + what + ": body " + std::to_string(h.index) +
+                                  " is " + kindName(b.kind) + ", not " + kindName(kind));
+    return b;
+  }
+
+  BodyHandle add(Body&& b) {
+    uint32_t slot;
+    if (!free_slots.empty()) {
+      slot = free_slots.back();
+      free_slots.pop_back();
+    } else {
+      slot = static_cast<uint32_t>(bodies.size());
+      if (slot == kInvalidIndex) throw std::length_error("DistanceService: too many bodies");
+      bodies.emplace_back();
+      broadphase.resize(bodies.size());
+    }
+    b.generation = bodies[slot].generation + 1;
+    b.alive = true;
+    b.box_dirty = true;
+    bodies[slot] = std::move(b);
+    broadphase.set(slot, Box3{});
+    ++live;
+    return {slot, bodies[slot].generation};
+  }
+
+  void refreshBox(Body& b) {
+    Box3 box;
+    if (b.kind == BodyKind::kRigid) {
+      const Vec3 &lo = b.shape->restLower(), &hi = b.shape->restUpper();
+      box.lower = Vec3::Constant(kInf);
+      box.upper = Vec3::Constant(-kInf);
+      double extent = 0;
+      for (int corner = 0; corner < 8; ++corner) {
+        const Vec3 c((corner & 1) ? hi.x() : lo.x(), (corner & 2) ? hi.y() : lo.y(), (corner & 4) ? hi.z() : lo.z());
+        const Vec3 w = b.rigid->toWorld(c);
+        box.lower = box.lower.cwiseMin(w);
+        box.upper = box.upper.cwiseMax(w);
+        extent = std::max(extent, w.cwiseAbs().maxCoeff());
+      }
+      // Rounding of the transform (the query runs in the body frame).
+      const double margin = 1e-12 * extent;
+      box.lower.array() -= margin;
+      box.upper.array() += margin;
+    } else {
+      const std::vector<Vec3>& pos = b.keyframed ? b.keyframed->positions() : b.deforming->positions();
+      box.lower = Vec3::Constant(kInf);
+      box.upper = Vec3::Constant(-kInf);
+      for (const Vec3& x : pos) {
+        box.lower = box.lower.cwiseMin(x);
+        box.upper = box.upper.cwiseMax(x);
+      }
+    }
+    b.box = box;
+  }
+
+  // Refreshes the boxes of the bodies changed since the last call; returns how many.
+  uint32_t refreshBoxes() {
+    std::vector<uint32_t> dirty;
+    for (uint32_t s = 0; s < bodies.size(); ++s)
+      if (bodies[s].alive && bodies[s].box_dirty) dirty.push_back(s);
+    if (dirty.size() == 1) {
+      refreshBox(bodies[dirty[0]]);
+    } else if (dirty.size() > 1) {
+      arena->execute([&] {
+        tbb::parallel_for(size_t(0), dirty.size(), [&](size_t i) { refreshBox(bodies[dirty[i]]); });
+      });
+    }
+    for (uint32_t s : dirty) {
+      bodies[s].box_dirty = false;
+      broadphase.set(s, bodies[s].box);
+    }
+    return static_cast<uint32_t>(dirty.size());
+  }
+
+  QueryStream& stream(Scratch& s, uint32_t slot) {
+    if (s.streams.size() < bodies.size()) s.streams.resize(bodies.size());
+    StreamSlot& ss = s.streams[slot];
+    const Body& b = bodies[slot];
+    if (!ss.stream || ss.generation != b.generation) {
+      ss.stream = std::make_unique<QueryStream>(b.shape->hierarchy());
+      ss.stream->setGeometry(b.geometry());
+      ss.generation = b.generation;
+    }
+    return *ss.stream;
+  }
+
+  // The hit of a query point q (in the body's frame) on `face` of body `slot`: closest point
+  // c (body frame), feature, barycentric coordinates, distance.
+  DistanceHit makeHit(uint32_t slot, const Vec3& q, TriangleIndex face, Feature feature, const Vec3& c,
+                      const Vec3& barycentric, double distance) const {
+    const Body& b = bodies[slot];
+    const BodyShape& shape = *b.shape;
+    DistanceHit hit;
+    hit.body = {slot, b.generation};
+    hit.triangle = face;
+    hit.feature = feature;
+    hit.barycentric = barycentric;
+    hit.distance = distance;
+    hit.closed_body = shape.closed();
+    const Vec3 normal = b.kind == BodyKind::kRigid ? shape.restPseudonormal(face, feature)
+                                                   : shape.pseudonormal(face, feature, b.positions());
+    const Vec3 offset = q - c;
+    const double length = offset.norm();
+    Vec3 direction = Vec3::Zero();
+    if (length > 0) {
+      direction = offset / length;
+    } else {
+      const double n = normal.norm();
+      if (n > 0) direction = normal / n;
+    }
+    if (!hit.closed_body)
+      hit.sign = HitSign::kUnsigned;
+    else
+      hit.sign = length > 0 && offset.dot(normal) < 0 ? HitSign::kInside : HitSign::kOutside;
+    hit.signed_distance = hit.sign == HitSign::kInside ? -distance : distance;
+    if (b.kind == BodyKind::kRigid) {
+      hit.point = b.rigid->toWorld(c);
+      hit.direction = b.rigid->pose().linear() * direction;
+    } else {
+      hit.point = c;
+      hit.direction = direction;
+    }
+    return hit;
+  }
+
+  Vec3 toBody(uint32_t slot, const Vec3& p) const {
+    const Body& b = bodies[slot];
+    return b.kind == BodyKind::kRigid ? b.rigid->toBody(p) : p;
+  }
+
+  // The broadphase of one block: candidate lists in s.candidates; statuses written.
+  void blockCandidates(Scratch& s, const PointsRef& points, size_t first, uint32_t count, double d,
+                       StepResult& out, StepStats& stats) {
+    const size_t slots = bodies.size();
+    s.candidates.resize(std::max<size_t>(1, count * slots));
+    s.candidate_count.resize(count);
+    for (uint32_t j = 0; j < count; ++j) {
+      const Vec3 p = points.row(first + j).transpose();
+      if (!p.allFinite()) {
+        out.status_[first + j] = PointStatus::kNotFinite;
+        s.candidate_count[j] = 0;
+        ++stats.invalid_points;
+        continue;
+      }
+      s.candidate_count[j] = static_cast<uint32_t>(broadphase.candidates(p, d, s.candidates.data() + j * slots));
+      stats.pairs += s.candidate_count[j];
+    }
+  }
+
+  void closestBlock(size_t block, const PointsRef& points, double d, StepResult& out) {
+    Scratch& s = scratch.local();
+    const size_t bs = options.block_size;
+    const size_t first = block * bs;
+    const uint32_t count = static_cast<uint32_t>(std::min<size_t>(bs, points.rows() - first));
+    const size_t slots = bodies.size();
+    StepStats& stats = block_stats[block];
+    blockCandidates(s, points, first, count, d, out, stats);
+
+    // Reuse the block's states in place when every point kept its bodies; else rebuild.
+    BlockStates& states = blocks[block];
+    bool same = states.points == count;
+    for (uint32_t j = 0; same && j < count; ++j) {
+      const uint32_t* cand = s.candidates.data() + j * slots;
+      const uint32_t b0 = states.begin[j];
+      same = states.begin[j + 1] - b0 == s.candidate_count[j];
+      for (uint32_t k = 0; same && k < s.candidate_count[j]; ++k)
+        same = states.pairs[b0 + k].slot == cand[k] && states.pairs[b0 + k].generation == bodies[cand[k]].generation;
+    }
+    if (!same) {
+      s.begin.resize(count + 1);
+      s.pairs.clear();
+      for (uint32_t j = 0; j < count; ++j) {
+        s.begin[j] = static_cast<uint32_t>(s.pairs.size());
+        uint32_t o = j < states.points ? states.begin[j] : 0;
+        const uint32_t o_end = j < states.points ? states.begin[j + 1] : 0;
+        const uint32_t* cand = s.candidates.data() + j * slots;
+        for (uint32_t k = 0; k < s.candidate_count[j]; ++k) {
+          const uint32_t slot = cand[k];
+          while (o < o_end && states.pairs[o].slot < slot) ++o;
+          if (o < o_end && states.pairs[o].slot == slot && states.pairs[o].generation == bodies[slot].generation) {
+            s.pairs.push_back(states.pairs[o]);
+          } else {
+            PairState fresh;
+            fresh.slot = slot;
+            fresh.generation = bodies[slot].generation;
+            // A moving body's geometry changes every step, which drops the cached set anyway:
+            // gather no spare candidates for it (the previous face still warm-starts).
+            fresh.state.reach_steps = bodies[slot].kind == BodyKind::kRigid ? options.reach_steps : 0.0f;
+            s.pairs.push_back(fresh);
+          }
+        }
+      }
+      s.begin[count] = static_cast<uint32_t>(s.pairs.size());
+      std::swap(states.begin, s.begin);
+      std::swap(states.pairs, s.pairs);
+      states.points = count;
+      // Keep memory bounded by what the block needs now (with slack against churn).
+      if (states.pairs.capacity() > 4 * states.pairs.size() + 64) states.pairs.shrink_to_fit();
+      if (s.pairs.capacity() > 4 * states.pairs.size() + 64) {
+        s.pairs.clear();
+        s.pairs.shrink_to_fit();
+      }
+    }
+
+    for (uint32_t j = 0; j < count; ++j) {
+      const size_t i = first + j;
+      const Vec3 p = points.row(i).transpose();
+      double best = kInf;
+      uint32_t best_slot = 0;
+      ClosestPoint best_c;
+      Vec3 best_q = Vec3::Zero();
+      for (uint32_t k = states.begin[j]; k < states.begin[j + 1]; ++k) {
+        PairState& pair = states.pairs[k];
+        const Body& body = bodies[pair.slot];
+        const Vec3 q = toBody(pair.slot, p);
+        // Pairs that cannot reach d are culled without a query (their state is kept as it is):
+        // a rigid body's distance is 1-Lipschitz in q; any face bounds the distance from above;
+        // else the tree's boxes decide.
+        bool query = true;
+        if (pair.state.last_face != kInvalidIndex) {
+          ++stats.warm_pairs;
+          const double moved = (q - pair.state.last_point).norm();
+          const bool rigid = body.kind == BodyKind::kRigid;
+          if (rigid && (pair.last_distance - moved) * (1 - 1e-12) > d) {
+            query = false;
+          } else if (!(rigid && (pair.last_distance + moved) * (1 + 1e-12) <= d)) {
+            const Vec3* x = body.positions();
+            const Triangle& t = body.shape->mesh().triangles[pair.state.last_face];
+            if (!(std::sqrt(squaredDistanceToTriangle(q, x[t[0]], x[t[1]], x[t[2]])) <= d))
+              query = treeMayReach(body.treeGeometry(), q, d);
+          }
+        } else {
+          query = treeMayReach(body.treeGeometry(), q, d);
+        }
+        if (!query) {
+          ++stats.culled_pairs;
+          continue;
+        }
+        bool certified = false;
+        const ClosestPoint c = stream(s, pair.slot).closestCoherent(q, pair.state, &certified);
+        pair.last_distance = c.distance;
+        stats.certified_pairs += certified;
+        stats.triangles_tested += c.counters.triangles_tested;
+        if (c.distance <= d && c.distance < best) {
+          best = c.distance;
+          best_slot = pair.slot;
+          best_c = c;
+          best_q = q;
+        }
+      }
+      if (best_c.triangle != kInvalidIndex) {  // set only for a hit within d
+        out.hits_[i] = makeHit(best_slot, best_q, best_c.triangle, best_c.feature, best_c.point,
+                               best_c.barycentric, best_c.distance);
+        out.count_[i] = 1;
+        ++stats.hits;
+      }
+    }
+    stats.states = states.pairs.size();
+  }
+
+  void withinBlock(size_t block, const PointsRef& points, double d, StepResult& out) {
+    Scratch& s = scratch.local();
+    const size_t bs = options.block_size;
+    const size_t first = block * bs;
+    const uint32_t count = static_cast<uint32_t>(std::min<size_t>(bs, points.rows() - first));
+    const size_t slots = bodies.size();
+    StepStats& stats = block_stats[block];
+    blockCandidates(s, points, first, count, d, out, stats);
+    std::vector<DistanceHit>& hits = block_hits[block];
+    hits.clear();
+    for (uint32_t j = 0; j < count; ++j) {
+      const size_t i = first + j;
+      const Vec3 p = points.row(i).transpose();
+      s.point_hits.clear();
+      const uint32_t* cand = s.candidates.data() + j * slots;
+      for (uint32_t k = 0; k < s.candidate_count[j]; ++k) {
+        const uint32_t slot = cand[k];
+        const Vec3 q = toBody(slot, p);
+        QueryStream& qs = stream(s, slot);
+        qs.within(q, d, s.triangle_hits);
+        stats.triangles_tested += qs.counters().triangles_tested;
+        for (const TriangleHit& t : s.triangle_hits)
+          s.point_hits.push_back(makeHit(slot, q, t.triangle, t.feature, t.point, t.barycentric, t.distance));
+      }
+      std::sort(s.point_hits.begin(), s.point_hits.end(), hitOrder);
+      out.begin_[i] = hits.size();  // block-local; offset added when the blocks are joined
+      out.count_[i] = static_cast<uint32_t>(s.point_hits.size());
+      hits.insert(hits.end(), s.point_hits.begin(), s.point_hits.end());
+      stats.hits += s.point_hits.size();
+    }
+  }
+};
+
+DistanceService::DistanceService(const ServiceOptions& options) : impl_(std::make_unique<Impl>()) {
+  if (options.block_size == 0) throw std::invalid_argument("DistanceService: block_size must be > 0");
+  if (!(options.reach_steps >= 0) || !std::isfinite(options.reach_steps))
+    throw std::invalid_argument("DistanceService: reach_steps must be finite and >= 0");
+  impl_->options = options;
+  setThreads(options.threads);
+}
+
+DistanceService::~DistanceService() = default;
+
+// ---- Shared tables --------------------------------------------------------------------------
+
+std::shared_ptr<const Hierarchy> DistanceService::hierarchyFor(const Mesh& mesh) {
+  auto it = impl_->mesh_cache.find(&mesh);
+  if (it != impl_->mesh_cache.end()) {
+    const MeshCacheEntry& e = it->second;
+    if (e.positions == mesh.positions.data() && e.triangles == mesh.triangles.data() &&
+        e.vertex_count == mesh.positions.size() && e.triangle_count == mesh.triangles.size())
+      return e.hierarchy;
+  }
+  MeshCacheEntry e;
+  e.hierarchy = Hierarchy::build(mesh);
+  e.positions = mesh.positions.data();
+  e.triangles = mesh.triangles.data();
+  e.vertex_count = mesh.positions.size();
+  e.triangle_count = mesh.triangles.size();
+  impl_->mesh_cache[&mesh] = e;
+  return e.hierarchy;
+}
+
+void DistanceService::forgetMesh(const Mesh& mesh) { impl_->mesh_cache.erase(&mesh); }
+
+std::shared_ptr<const BodyShape> DistanceService::shapeFor(const std::shared_ptr<const Hierarchy>& hierarchy) {
+  if (!hierarchy) throw std::invalid_argument("DistanceService: null hierarchy");
+  auto& entry = impl_->shapes[hierarchy.get()];
+  std::shared_ptr<const BodyShape> shape = entry.lock();
+  // The shape holds its hierarchy, so a live entry cannot name a recycled address.
+  if (shape && shape->hierarchy() == hierarchy) return shape;
+  shape = BodyShape::build(hierarchy);
+  entry = shape;
+  // Forget shapes no body uses any more.
+  for (auto i = impl_->shapes.begin(); i != impl_->shapes.end();)
+    i = i->second.expired() ? impl_->shapes.erase(i) : std::next(i);
+  return shape;
+}
+
+// ---- Bodies ---------------------------------------------------------------------------------
+
+BodyHandle DistanceService::addRigid(std::shared_ptr<const Hierarchy> hierarchy, const Eigen::Isometry3d& pose) {
+  Body b;
+  b.kind = BodyKind::kRigid;
+  b.shape = shapeFor(hierarchy);
+  b.rest = hierarchy->restGeometry();
+  b.rigid = std::make_unique<RigidBody>(std::move(hierarchy), pose);
+  return impl_->add(std::move(b));
+}
+
+BodyHandle DistanceService::addKeyframed(std::shared_ptr<const Hierarchy> hierarchy,
+                                         std::vector<std::vector<Vec3>> frames, double time) {
+  if (!std::isfinite(time)) throw std::invalid_argument("DistanceService::addKeyframed: time is not finite");
+  Body b;
+  b.kind = BodyKind::kKeyframed;
+  b.shape = shapeFor(hierarchy);
+  b.keyframed = std::make_unique<KeyframeBody>(std::move(hierarchy), std::move(frames));
+  b.keyframed->setTime(time);
+  return impl_->add(std::move(b));
+}
+
+BodyHandle DistanceService::addDeforming(std::shared_ptr<const Hierarchy> hierarchy, double displacement_bound,
+                                         const std::vector<Vec3>& positions) {
+  if (!(displacement_bound >= 0) || !std::isfinite(displacement_bound))
+    throw std::invalid_argument("DistanceService::addDeforming: displacement_bound must be finite and >= 0");
+  Body b;
+  b.kind = BodyKind::kDeforming;
+  b.shape = shapeFor(hierarchy);
+  b.deforming = std::make_unique<DeformingBody>(std::move(hierarchy));
+  if (!positions.empty()) b.deforming->anchor(positions);
+  b.deforming->inflate(displacement_bound);
+  b.displacement_bound = displacement_bound;
+  return impl_->add(std::move(b));
+}
+
+void DistanceService::remove(BodyHandle handle) {
+  Body& b = impl_->body(handle, "remove");
+  const uint32_t generation = b.generation;
+  b = Body{};
+  b.generation = generation;  // the next body in this slot gets generation + 1
+  impl_->broadphase.set(handle.index, Box3{});
+  impl_->free_slots.push_back(handle.index);
+  --impl_->live;
+  for (Scratch& s : impl_->scratch)
+    if (handle.index < s.streams.size()) s.streams[handle.index] = StreamSlot{};
+}
+
+bool DistanceService::contains(BodyHandle h) const {
+  return h.index < impl_->bodies.size() && impl_->bodies[h.index].alive &&
+         impl_->bodies[h.index].generation == h.generation;
+}
+
+size_t DistanceService::bodyCount() const { return impl_->live; }
+
+std::vector<BodyHandle> DistanceService::bodies() const {
+  std::vector<BodyHandle> out;
+  for (uint32_t s = 0; s < impl_->bodies.size(); ++s)
+    if (impl_->bodies[s].alive) out.push_back({s, impl_->bodies[s].generation});
+  return out;
+}
+
+BodyKind DistanceService::kind(BodyHandle body) const { return impl_->body(body, "kind").kind; }
+
+const BodyShape& DistanceService::shape(BodyHandle body) const { return *impl_->body(body, "shape").shape; }
+
+void DistanceService::setPose(BodyHandle body, const Eigen::Isometry3d& pose) {
+  Body& b = impl_->body(body, "setPose", BodyKind::kRigid);
+  b.rigid->setPose(pose);
+  b.box_dirty = true;
+}
+
+const Eigen::Isometry3d& DistanceService::pose(BodyHandle body) const {
+  return impl_->body(body, "pose", BodyKind::kRigid).rigid->pose();
+}
+
+void DistanceService::setTime(BodyHandle body, double t) {
+  Body& b = impl_->body(body, "setTime", BodyKind::kKeyframed);
+  if (!std::isfinite(t)) throw std::invalid_argument("DistanceService::setTime: time is not finite");
+  b.keyframed->setTime(t);
+  b.box_dirty = true;
+}
+
+PositionsUpdate DistanceService::setPositions(BodyHandle body, PointsRef positions) {
+  impl_->body(body, "setPositions", BodyKind::kDeforming);
+  std::vector<Vec3>& v = impl_->positions_scratch;
+  v.resize(static_cast<size_t>(positions.rows()));
+  for (Eigen::Index i = 0; i < positions.rows(); ++i) v[i] = positions.row(i).transpose();
+  return setPositions(body, v);
+}
+
+PositionsUpdate DistanceService::setPositions(BodyHandle body, const std::vector<Vec3>& positions) {
+  Body& b = impl_->body(body, "setPositions", BodyKind::kDeforming);
+  // Throws (body unchanged) on a wrong count or a non-finite position.
+  const DisplacementCheck check = b.deforming->setPositions(positions);
+  PositionsUpdate update;
+  if (!check.accepted) {
+    b.deforming->anchor(positions);
+    b.deforming->inflate(b.displacement_bound);
+    update.reanchored = true;
+    update.worst_vertex = check.worst_vertex;
+    update.excess = check.excess;
+  }
+  b.box_dirty = true;
+  return update;
+}
+
+void DistanceService::setDisplacementBound(BodyHandle body, double displacement_bound) {
+  Body& b = impl_->body(body, "setDisplacementBound", BodyKind::kDeforming);
+  if (!(displacement_bound >= 0) || !std::isfinite(displacement_bound))
+    throw std::invalid_argument("DistanceService::setDisplacementBound: the bound must be finite and >= 0");
+  const std::vector<Vec3> current = b.deforming->positions();
+  b.deforming->anchor(current);
+  b.deforming->inflate(displacement_bound);
+  b.displacement_bound = displacement_bound;
+}
+
+const std::vector<Vec3>& DistanceService::positions(BodyHandle body) const {
+  Body& b = impl_->body(body, "positions");
+  if (b.keyframed) return b.keyframed->positions();
+  if (b.deforming) return b.deforming->positions();
+  throw std::invalid_argument("DistanceService::positions: body " + std::to_string(body.index) +
+                              " is rigid (its positions are the mesh's, placed by its pose)");
+}
+
+Box3 DistanceService::worldBox(BodyHandle body) {
+  Body& b = impl_->body(body, "worldBox");
+  if (b.box_dirty) {
+    impl_->refreshBox(b);
+    b.box_dirty = false;
+    impl_->broadphase.set(body.index, b.box);
+  }
+  return b.box;
+}
+
+// ---- Queries --------------------------------------------------------------------------------
+
+StepResult DistanceService::step(PointsRef points, double max_distance, QueryMode mode) {
+  StepResult out;
+  step(points, max_distance, mode, out);
+  return out;
+}
+
+void DistanceService::step(PointsRef points, double max_distance, QueryMode mode, StepResult& out) {
+  if (std::isnan(max_distance) || max_distance < 0)
+    throw std::invalid_argument("DistanceService::step: max_distance must be >= 0 (got " +
+                                std::to_string(max_distance) + ")");
+  Impl& m = *impl_;
+  auto start = std::chrono::steady_clock::now();
+  const uint32_t refreshed = m.refreshBoxes();
+  const double bounds_seconds = secondsSince(start);
+  start = std::chrono::steady_clock::now();
+
+  const size_t n = static_cast<size_t>(points.rows());
+  const size_t bs = m.options.block_size;
+  const size_t block_count = (n + bs - 1) / bs;
+  out.mode_ = mode;
+  out.max_distance_ = max_distance;
+  out.status_.assign(n, PointStatus::kOk);
+  out.count_.assign(n, 0);
+  out.stats_ = {};
+  m.block_stats.assign(block_count, StepStats{});
+  if (mode == QueryMode::kClosest) {
+    out.begin_.clear();
+    out.hits_.resize(n);
+    m.blocks.resize(block_count);  // blocks past the batch drop their states
+  } else {
+    out.begin_.resize(n);
+    m.block_hits.resize(block_count);
+  }
+  m.arena->execute([&] {
+    tbb::parallel_for(
+        tbb::blocked_range<size_t>(0, block_count, 1),
+        [&](const tbb::blocked_range<size_t>& r) {
+          for (size_t b = r.begin(); b != r.end(); ++b) {
+            if (mode == QueryMode::kClosest)
+              m.closestBlock(b, points, max_distance, out);
+            else
+              m.withinBlock(b, points, max_distance, out);
+          }
+        },
+        tbb::simple_partitioner());
+  });
+  if (mode == QueryMode::kWithin) {
+    std::vector<size_t> offset(block_count + 1, 0);
+    for (size_t b = 0; b < block_count; ++b) offset[b + 1] = offset[b] + m.block_hits[b].size();
+    out.hits_.resize(offset[block_count]);
+    m.arena->execute([&] {
+      tbb::parallel_for(size_t(0), block_count, [&](size_t b) {
+        std::copy(m.block_hits[b].begin(), m.block_hits[b].end(), out.hits_.begin() + offset[b]);
+        const size_t last = std::min(n, (b + 1) * bs);
+        for (size_t i = b * bs; i < last; ++i) out.begin_[i] += offset[b];
+      });
+    });
+  }
+  StepStats& stats = out.stats_;
+  for (const StepStats& s : m.block_stats) {
+    stats.invalid_points += s.invalid_points;
+    stats.pairs += s.pairs;
+    stats.warm_pairs += s.warm_pairs;
+    stats.certified_pairs += s.certified_pairs;
+    stats.culled_pairs += s.culled_pairs;
+    stats.triangles_tested += s.triangles_tested;
+    stats.hits += s.hits;
+    stats.states += s.states;
+  }
+  if (mode == QueryMode::kWithin) stats.states = coherentStates();
+  stats.points = n;
+  stats.bodies_refreshed = refreshed;
+  stats.bounds_seconds = bounds_seconds;
+  stats.query_seconds = secondsSince(start);
+}
+
+void DistanceService::setThreads(unsigned threads) {
+  impl_->threads = threads;
+  impl_->arena = std::make_unique<tbb::task_arena>(threads == 0 ? static_cast<int>(tbb::task_arena::automatic)
+                                                                 : static_cast<int>(threads));
+}
+
+unsigned DistanceService::threads() const { return static_cast<unsigned>(impl_->arena->max_concurrency()); }
+
+size_t DistanceService::coherentStates() const {
+  size_t total = 0;
+  for (const BlockStates& b : impl_->blocks) total += b.pairs.size();
+  return total;
+}
+
+size_t DistanceService::coherentStateBytes() const {
+  size_t total = 0;
+  for (const BlockStates& b : impl_->blocks)
+    total += b.pairs.capacity() * sizeof(PairState) + b.begin.capacity() * sizeof(uint32_t);
+  return total;
+}
+
+void DistanceService::clearCoherentStates() { impl_->blocks.clear(); }
+
+}  // namespace meshsweeper

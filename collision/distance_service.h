@@ -1,0 +1,266 @@
+#pragma once
+// The distance-query service (DESIGN.md section 5): bodies in a world, a broadphase, and batched,
+// parallel, exact closest-point / within-distance queries for many moving points (cloth
+// vertices, particles) step after step.
+//
+// Lifetimes (STYLE.md):
+//  - fixed, shared: Hierarchy (caller-built, or hierarchyFor()) and BodyShape (topology,
+//    closedness, rest pseudonormals), one per mesh whatever the number of bodies using it;
+//  - per body, per step: pose, key-frame time or deformed positions with their bounds
+//    (deform/), and the body's world box, recomputed once per step when it changed;
+//  - per (point, body) pair: a CoherentState (core/sweep_query.h, ~200 bytes) carried from one
+//    step to the next, plus one QueryStream per thread and body that lends scratch memory.
+//
+// Coherent-state policy: a step keeps exactly the states of the (point, body) pairs it queried
+// in closest mode; a pair that the broadphase no longer reports (the point left the body's box
+// inflated by the query distance) is dropped, and starts cold if it comes back. Memory is
+// therefore bounded by the pairs of the last step. Steps in within mode neither use nor change
+// the states. A state is tied to the body's handle: removing a body drops its states (a new
+// body in the same slot has a new generation and starts cold).
+//
+// Threads: step() splits the points into fixed blocks of ServiceOptions::block_size points and
+// runs them with tbb::parallel_for in the service's own tbb::task_arena (setThreads()). Each
+// point's work depends only on that point, its states and the bodies, and every result is
+// written to its own slot, so results are bitwise identical for any number of threads.
+// The service itself is not thread-safe: call its methods from one thread at a time, and do not
+// change bodies during step().
+//
+// Exactness: every distance is exact (the hierarchy queries are exact, rigid bodies are queried
+// in their own frame, deforming bodies through proven bounds), so no [lower, upper] is carried:
+// lower == upper == distance.
+#include "collision/body.h"
+#include "collision/broadphase.h"
+#include "core/sweep_query.h"
+
+#include <Eigen/Core>
+#include <Eigen/Geometry>
+
+#include <memory>
+#include <vector>
+
+namespace meshsweeper {
+
+// Query points and positions: one row (x, y, z) per point.
+using PointMatrix = Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor>;
+using PointsRef = Eigen::Ref<const PointMatrix>;
+
+// A body of a DistanceService: slot index and generation. A handle stays valid until its body
+// is removed; after that every use throws std::invalid_argument ("stale body handle"), even if
+// the slot holds a new body. A default-constructed handle is never valid.
+struct BodyHandle {
+  uint32_t index = kInvalidIndex;
+  uint32_t generation = 0;
+  friend bool operator==(const BodyHandle& a, const BodyHandle& b) {
+    return a.index == b.index && a.generation == b.generation;
+  }
+  friend bool operator!=(const BodyHandle& a, const BodyHandle& b) { return !(a == b); }
+};
+
+enum class BodyKind : uint8_t {
+  kRigid,      // shared hierarchy at a pose (setPose)
+  kKeyframed,  // positions interpolated between key frames (setTime)
+  kDeforming,  // arbitrary positions each step, displacement-inflated bounds (setPositions)
+};
+
+enum class QueryMode : uint8_t {
+  kClosest,  // per point: the closest triangle over all bodies, if within the distance
+  kWithin,   // per point: every triangle of every body within the distance
+};
+
+// Sign of a hit. Only closed bodies (BodyShape::closed()) are signed.
+enum class HitSign : int8_t { kInside = -1, kUnsigned = 0, kOutside = 1 };
+
+enum class PointStatus : uint8_t {
+  kOk = 0,
+  kNotFinite = 1,  // the point has a NaN or infinite coordinate: no hits, its states dropped
+};
+
+// One answer: a triangle of a body and the closest point on it. All vectors in world space.
+struct DistanceHit {
+  BodyHandle body;
+  TriangleIndex triangle = kInvalidIndex;  // original face index of the body's mesh (file order)
+  Feature feature = Feature::kFace;        // vertex, edge or face of `triangle` holding `point`
+  HitSign sign = HitSign::kUnsigned;       // kUnsigned exactly when !closed_body
+  bool closed_body = false;                // the body's mesh is closed (signed distances)
+  double distance = 0;                     // exact Euclidean distance, >= 0
+  double signed_distance = 0;              // -distance inside a closed body, else +distance
+  Vec3 point = Vec3::Zero();               // closest point on the body's surface
+  Vec3 barycentric = Vec3::Zero();         // point = b0*A + b1*B + b2*C of the triangle
+  // Unit vector from `point` to the query point. At distance 0, the feature's pseudonormal
+  // (outward for a closed body), normalised; the zero vector only if that pseudonormal is zero
+  // (a feature whose faces all have zero area).
+  Vec3 direction = Vec3::Zero();
+};
+
+// Work done by one step (summed over points; identical for any thread count).
+struct StepStats {
+  uint64_t points = 0;            // points in the batch
+  uint64_t invalid_points = 0;    // points with status kNotFinite
+  uint64_t pairs = 0;             // (point, body) pairs the broadphase passed to a body
+  uint64_t warm_pairs = 0;        // closest mode: pairs that had a state from the last step
+  uint64_t certified_pairs = 0;   // closest mode: pairs answered from the cached candidate set
+  uint64_t culled_pairs = 0;      // closest mode: pairs proven farther than the distance, not queried
+  uint64_t triangles_tested = 0;  // exact point-triangle distances
+  uint64_t hits = 0;              // hits returned
+  uint64_t states = 0;            // coherent states kept after the step
+  uint32_t bodies_refreshed = 0;  // world boxes recomputed at the start of the step
+  double bounds_seconds = 0;      // body boxes
+  double query_seconds = 0;       // broadphase and queries
+};
+
+// The answers of one step, per point. Reused by step() (its memory is kept).
+class StepResult {
+ public:
+  // A range of hits (C++17 stand-in for std::span).
+  struct Hits {
+    const DistanceHit* first = nullptr;
+    const DistanceHit* last = nullptr;
+    const DistanceHit* begin() const { return first; }
+    const DistanceHit* end() const { return last; }
+    size_t size() const { return static_cast<size_t>(last - first); }
+    bool empty() const { return first == last; }
+    const DistanceHit& operator[](size_t i) const { return first[i]; }
+  };
+
+  QueryMode mode() const { return mode_; }
+  double maxDistance() const { return max_distance_; }
+  size_t size() const { return status_.size(); }  // points
+  PointStatus status(size_t point) const { return status_[point]; }
+
+  // kClosest: the closest hit of the point within the distance (the lowest body slot among
+  // bodies at exactly the same distance), or nullptr if none. kWithin: nullptr.
+  const DistanceHit* closest(size_t point) const {
+    return mode_ == QueryMode::kClosest && count_[point] ? &hits_[point] : nullptr;
+  }
+  // kClosest: 0 or 1 hit. kWithin: every hit of the point, by increasing distance, then body
+  // slot, then triangle index.
+  Hits hits(size_t point) const {
+    const DistanceHit* first = hits_.data() + (mode_ == QueryMode::kClosest ? point : begin_[point]);
+    return {first, first + count_[point]};
+  }
+  const StepStats& stats() const { return stats_; }
+
+ private:
+  friend class DistanceService;
+  QueryMode mode_ = QueryMode::kClosest;
+  double max_distance_ = 0;
+  std::vector<PointStatus> status_;  // [point]
+  std::vector<uint32_t> count_;      // [point] hits
+  std::vector<size_t> begin_;        // [point] kWithin: first hit in hits_
+  std::vector<DistanceHit> hits_;    // kClosest: [point] (valid where count_ is 1); kWithin: CSR
+  StepStats stats_;
+};
+
+// What setPositions() did.
+struct PositionsUpdate {
+  // false: every vertex stayed within its displacement bound; the bounds were kept (cheap).
+  // true: some vertex left its bound; the body was re-anchored at the new positions (bounds
+  // recomputed exactly there, then inflated by the body's displacement bound again; costs the
+  // build's radius phase). Either way the next queries are exact.
+  bool reanchored = false;
+  VertexIndex worst_vertex = kInvalidIndex;  // reanchored: the vertex farthest past its bound
+  double excess = 0;                         // reanchored: how far past its bound it was
+};
+
+struct ServiceOptions {
+  // Threads of the service's task arena; 0 = TBB's default (all cores). See setThreads().
+  unsigned threads = 0;
+  // Points per parallel task (fixed for the service's life; results never depend on it).
+  uint32_t block_size = 128;
+  // Coherent states of rigid bodies gather candidates within d + 2 R, R = reach_steps times the
+  // point's mean step (CoherentState::reach_steps): larger means fewer rebuilds but larger
+  // sets. Deforming and key-framed bodies use 0 (their geometry changes every step, which
+  // drops the set anyway). Answers never depend on it.
+  float reach_steps = 2;
+};
+
+class DistanceService {
+ public:
+  explicit DistanceService(const ServiceOptions& options = {});
+  ~DistanceService();
+  DistanceService(const DistanceService&) = delete;
+  DistanceService& operator=(const DistanceService&) = delete;
+
+  // ---- Shared tables ---------------------------------------------------------------------
+  // The hierarchy of `mesh`, built on first use and cached by the mesh's address: later calls
+  // with the same Mesh object return the same shared hierarchy. The cache trusts the caller:
+  // a cached mesh must not be changed in place (a change of vertex or triangle count, or of
+  // the vectors' storage, is detected and rebuilds). forgetMesh() drops an entry. Throws
+  // MeshError for an invalid mesh.
+  std::shared_ptr<const Hierarchy> hierarchyFor(const Mesh& mesh);
+  void forgetMesh(const Mesh& mesh);
+  // The shared per-mesh tables the service uses for `hierarchy` (built once per hierarchy and
+  // shared by all its bodies while any of them exists).
+  std::shared_ptr<const BodyShape> shapeFor(const std::shared_ptr<const Hierarchy>& hierarchy);
+
+  // ---- Bodies ----------------------------------------------------------------------------
+  // Each add* throws std::invalid_argument for a null hierarchy or bad parameters (as the
+  // deform/ classes check them); the hierarchy is shared, not copied.
+
+  // A rigid body at `pose` (rotation + translation; std::invalid_argument if not rigid).
+  BodyHandle addRigid(std::shared_ptr<const Hierarchy> hierarchy,
+                      const Eigen::Isometry3d& pose = Eigen::Isometry3d::Identity());
+  // A key-framed body: frames[f][vertex] world positions, at time `time` (see setTime()).
+  BodyHandle addKeyframed(std::shared_ptr<const Hierarchy> hierarchy,
+                          std::vector<std::vector<Vec3>> frames, double time = 0);
+  // A freely deforming body starting at `positions` (empty: the mesh's positions), whose
+  // vertices may each move up to `displacement_bound` (>= 0, finite; world units) from where
+  // the bounds were last computed before setPositions() re-anchors (see PositionsUpdate).
+  // A bound of a few steps' motion keeps re-anchoring rare.
+  BodyHandle addDeforming(std::shared_ptr<const Hierarchy> hierarchy, double displacement_bound,
+                          const std::vector<Vec3>& positions = {});
+
+  // Removes the body; its handle becomes stale. Throws std::invalid_argument for a stale handle.
+  void remove(BodyHandle body);
+  // True when `body` names a body of this service.
+  bool contains(BodyHandle body) const;
+  size_t bodyCount() const;
+  // The live bodies by increasing slot.
+  std::vector<BodyHandle> bodies() const;
+
+  // Every accessor and setter below throws std::invalid_argument for a stale handle, or for a
+  // body of the wrong kind.
+  BodyKind kind(BodyHandle body) const;
+  const BodyShape& shape(BodyHandle body) const;
+  // kRigid.
+  void setPose(BodyHandle body, const Eigen::Isometry3d& pose);
+  const Eigen::Isometry3d& pose(BodyHandle body) const;
+  // kKeyframed: t in [0, frames - 1] (clamped; std::invalid_argument if not finite).
+  void setTime(BodyHandle body, double t);
+  // kDeforming: one position per mesh vertex (std::invalid_argument on a wrong count or a
+  // non-finite coordinate; the body is then unchanged).
+  PositionsUpdate setPositions(BodyHandle body, PointsRef positions);
+  PositionsUpdate setPositions(BodyHandle body, const std::vector<Vec3>& positions);
+  // kDeforming: changes the displacement bound and re-anchors at the current positions.
+  void setDisplacementBound(BodyHandle body, double displacement_bound);
+  // kKeyframed, kDeforming: the current world positions [vertex].
+  const std::vector<Vec3>& positions(BodyHandle body) const;
+  // The body's world box: rigid, its rest box's 8 corners transformed (with a 1e-12 relative
+  // margin for rounding); otherwise the box of its current positions.
+  Box3 worldBox(BodyHandle body);
+
+  // ---- Queries ---------------------------------------------------------------------------
+  // Answers every point (one row each) against every body within `max_distance` (>= 0;
+  // +infinity allowed): kClosest keeps the closest hit over all bodies, kWithin every triangle
+  // within the distance. Points with a NaN or infinite coordinate get PointStatus::kNotFinite and
+  // no hits (the step goes on). Throws std::invalid_argument if max_distance is NaN or negative.
+  // Results are written into `out` (its memory reused).
+  void step(PointsRef points, double max_distance, QueryMode mode, StepResult& out);
+  StepResult step(PointsRef points, double max_distance, QueryMode mode = QueryMode::kClosest);
+
+  // Threads used by step(): 0 = TBB's default. Results do not depend on it.
+  void setThreads(unsigned threads);
+  unsigned threads() const;
+
+  // Coherent states currently kept, and their memory in bytes (capacity).
+  size_t coherentStates() const;
+  size_t coherentStateBytes() const;
+  // Drops every coherent state (the next step starts cold).
+  void clearCoherentStates();
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace meshsweeper

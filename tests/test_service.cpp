@@ -1,0 +1,742 @@
+// The distance-query service (collision/; DESIGN.md section 5) against brute force over every
+// body and triangle, step by step:
+//  - a world of rigid (open and closed), key-framed and freely deforming bodies, several steps
+//    of motion; per point the closest hit over all bodies within the distance, and every hit
+//    within it, equal brute force on the bodies' current world meshes; the same world run with
+//    1 and 2 threads gives bitwise identical results; a body removed and another added mid-run;
+//  - signs on closed meshes (icosphere, torus, armadillo; rigid, key-framed and deforming)
+//    against a generalised winding number computed here; open meshes answer unsigned;
+//  - direction and sign at distance 0 (the feature's pseudonormal);
+//  - pseudonormals computed on demand equal the precomputed rest tables;
+//  - the broadphase against its reference; memory of the coherent states stays bounded;
+//    pairs culled without a query (proven out of reach) are part of the oracle runs;
+//  - shared tables: hierarchyFor() caches by mesh, bodies of one hierarchy share one shape;
+//  - bad input: NaN points (per-point status), stale handles, wrong sizes, wrong body kinds.
+// Distances: 1e-10 absolute (scenes of size ~5; rigid bodies are queried in their own frame,
+// brute force runs on the transformed mesh).
+#include "collision/broadphase.h"
+#include "collision/distance_service.h"
+#include "core/brute_force.h"
+#include "core/mesh_io.h"
+#include "core/triangle_distance.h"
+#include "scenes/procedural.h"
+
+#include <catch2/catch.hpp>
+
+#include <Eigen/Geometry>
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+#include <filesystem>
+#include <limits>
+#include <map>
+#include <memory>
+#include <sstream>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+using namespace meshsweeper;
+using scenes::Random;
+
+namespace {
+
+constexpr double kTolerance = 1e-10;
+constexpr double kPi = 3.14159265358979323846;
+constexpr double kInf = std::numeric_limits<double>::infinity();
+
+std::string text(const Vec3& p) {
+  std::ostringstream out;
+  out.precision(17);
+  out << "(" << p.x() << ", " << p.y() << ", " << p.z() << ")";
+  return out.str();
+}
+
+// Counts the failures of one kind of check; shows the first few in full, then a total.
+class Failures {
+ public:
+  explicit Failures(std::string what) : what_(std::move(what)) {}
+  Failures(const Failures&) = delete;
+  Failures& operator=(const Failures&) = delete;
+  template <class F>
+  void check(bool ok, F&& message) {
+    ++checks_;
+    if (ok) return;
+    if (++count_ <= kShown) FAIL_CHECK(what_ << ": " << message());
+  }
+  size_t checks() const { return checks_; }
+  ~Failures() {
+    if (count_ > kShown) FAIL_CHECK(what_ << ": " << count_ << " failures in all (first " << kShown << " shown)");
+  }
+
+ private:
+  static constexpr size_t kShown = 4;
+  std::string what_;
+  size_t count_ = 0;
+  size_t checks_ = 0;
+};
+
+const Mesh* realMesh(const std::string& name) {
+  static std::map<std::string, std::unique_ptr<Mesh>> cache;
+  auto it = cache.find(name);
+  if (it != cache.end()) return it->second.get();
+  const std::string path = scenes::meshPath(name);
+  std::unique_ptr<Mesh> mesh;
+  if (!std::filesystem::exists(path)) {
+    FAIL_CHECK("missing real mesh " << path << " (run scripts/fetch_data.sh)");
+  } else {
+    mesh = std::make_unique<Mesh>(readMesh(path));
+    mesh->name = name;
+  }
+  return cache.emplace(name, std::move(mesh)).first->second.get();
+}
+
+Eigen::Isometry3d makePose(double angle, const Vec3& axis, const Vec3& translation) {
+  Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();
+  pose.linear() = Eigen::AngleAxisd(angle, axis.normalized()).toRotationMatrix();
+  pose.translation() = translation;
+  return pose;
+}
+
+std::vector<Vec3> transformed(const std::vector<Vec3>& positions, const Eigen::Isometry3d& pose) {
+  std::vector<Vec3> out(positions.size());
+  for (size_t v = 0; v < positions.size(); ++v) out[v] = pose * positions[v];
+  return out;
+}
+
+Mesh withPositions(const Mesh& mesh, const std::vector<Vec3>& positions) {
+  Mesh out;
+  out.positions = positions;
+  out.triangles = mesh.triangles;
+  out.name = mesh.name + " (moved)";
+  return out;
+}
+
+// A smooth non-rigid deformation: a wave along the radial direction plus a twist about z, for a
+// shape of size about `size` around `center`.
+std::vector<Vec3> wave(const std::vector<Vec3>& rest, const Vec3& center, double amplitude, double phase,
+                       double size = 1) {
+  std::vector<Vec3> out(rest.size());
+  for (size_t v = 0; v < rest.size(); ++v) {
+    const Vec3 r = rest[v] - center;
+    const double s = 1 + amplitude * std::sin((3 * r.x() + 2 * r.y()) / size + phase);
+    const double twist = amplitude * r.z() / size;
+    const Vec3 twisted(std::cos(twist) * r.x() - std::sin(twist) * r.y(),
+                       std::sin(twist) * r.x() + std::cos(twist) * r.y(), r.z());
+    out[v] = center + s * twisted;
+  }
+  return out;
+}
+
+PointMatrix toMatrix(const std::vector<Vec3>& points) {
+  PointMatrix m(points.size(), 3);
+  for (size_t i = 0; i < points.size(); ++i) m.row(i) = points[i].transpose();
+  return m;
+}
+
+// Generalised winding number of a closed mesh at p (van Oosterom & Strackee solid angles):
+// about 1 inside, 0 outside.
+double windingNumber(const Mesh& mesh, const Vec3& p) {
+  double total = 0;
+  for (const Triangle& t : mesh.triangles) {
+    const Vec3 a = mesh.positions[t[0]] - p, b = mesh.positions[t[1]] - p, c = mesh.positions[t[2]] - p;
+    const double la = a.norm(), lb = b.norm(), lc = c.norm();
+    const double numerator = a.dot(b.cross(c));
+    const double denominator = la * lb * lc + a.dot(b) * lc + b.dot(c) * la + c.dot(a) * lb;
+    total += 2 * std::atan2(numerator, denominator);
+  }
+  return total / (4 * kPi);
+}
+
+bool sameHit(const DistanceHit& a, const DistanceHit& b) {
+  return a.body == b.body && a.triangle == b.triangle && a.feature == b.feature && a.sign == b.sign &&
+         a.closed_body == b.closed_body && a.distance == b.distance && a.signed_distance == b.signed_distance &&
+         a.point == b.point && a.barycentric == b.barycentric && a.direction == b.direction;
+}
+
+// Bitwise equality of two steps' results.
+void checkIdentical(const StepResult& a, const StepResult& b, Failures& failures) {
+  failures.check(a.size() == b.size(), [&] { return "sizes differ"; });
+  for (size_t i = 0; i < a.size() && i < b.size(); ++i) {
+    const auto ha = a.hits(i), hb = b.hits(i);
+    bool same = a.status(i) == b.status(i) && ha.size() == hb.size();
+    for (size_t k = 0; same && k < ha.size(); ++k) same = sameHit(ha[k], hb[k]);
+    failures.check(same, [&] { return "point " + std::to_string(i) + ": results differ between thread counts"; });
+  }
+  failures.check(a.stats().pairs == b.stats().pairs && a.stats().certified_pairs == b.stats().certified_pairs &&
+                     a.stats().triangles_tested == b.stats().triangles_tested,
+                 [&] { return "step statistics differ between thread counts"; });
+}
+
+// The same world driven in two services (1 and 2 threads), with the reference meshes.
+struct Twin {
+  struct Ref {
+    BodyHandle handle;
+    Mesh world;  // current world mesh (brute force)
+    bool closed = false;
+  };
+  DistanceService one{ServiceOptions{1, 32}};
+  DistanceService two{ServiceOptions{2, 32}};
+  std::map<uint32_t, Ref> bodies;  // [slot]
+
+  BodyHandle add(BodyHandle h1, BodyHandle h2, Mesh world) {
+    REQUIRE(h1 == h2);
+    Ref ref;
+    ref.handle = h1;
+    ref.world = std::move(world);
+    ref.closed = one.shape(h1).closed();
+    bodies[h1.index] = std::move(ref);
+    return h1;
+  }
+  BodyHandle addRigid(const std::shared_ptr<const Hierarchy>& h, const Eigen::Isometry3d& pose) {
+    return add(one.addRigid(h, pose), two.addRigid(h, pose),
+               withPositions(h->mesh(), transformed(h->mesh().positions, pose)));
+  }
+  BodyHandle addKeyframed(const std::shared_ptr<const Hierarchy>& h, const std::vector<std::vector<Vec3>>& frames) {
+    const BodyHandle b = add(one.addKeyframed(h, frames, 0), two.addKeyframed(h, frames, 0),
+                             withPositions(h->mesh(), frames[0]));
+    return b;
+  }
+  BodyHandle addDeforming(const std::shared_ptr<const Hierarchy>& h, double bound, const std::vector<Vec3>& positions) {
+    return add(one.addDeforming(h, bound, positions), two.addDeforming(h, bound, positions),
+               withPositions(h->mesh(), positions));
+  }
+  void remove(BodyHandle b) {
+    one.remove(b);
+    two.remove(b);
+    bodies.erase(b.index);
+  }
+  void setPose(BodyHandle b, const Eigen::Isometry3d& pose) {
+    one.setPose(b, pose);
+    two.setPose(b, pose);
+    const Mesh& rest = one.shape(b).mesh();
+    bodies[b.index].world = withPositions(rest, transformed(rest.positions, pose));
+  }
+  void setTime(BodyHandle b, double t) {
+    one.setTime(b, t);
+    two.setTime(b, t);
+    REQUIRE(one.positions(b) == two.positions(b));
+    bodies[b.index].world.positions = one.positions(b);
+  }
+  PositionsUpdate setPositions(BodyHandle b, const std::vector<Vec3>& positions) {
+    const PositionsUpdate u1 = one.setPositions(b, toMatrix(positions));
+    const PositionsUpdate u2 = two.setPositions(b, positions);
+    REQUIRE(u1.reanchored == u2.reanchored);
+    bodies[b.index].world.positions = positions;
+    return u1;
+  }
+};
+
+// The hit is a true point of its triangle at its distance, with consistent fields.
+void checkHitFields(const Twin& twin, const Vec3& p, const DistanceHit& hit, Failures& failures) {
+  auto it = twin.bodies.find(hit.body.index);
+  if (it == twin.bodies.end() || it->second.handle != hit.body) {
+    failures.check(false, [&] { return "hit names an unknown body"; });
+    return;
+  }
+  const Mesh& world = it->second.world;
+  const Triangle& t = world.triangles.at(hit.triangle);
+  const Vec3 &a = world.positions[t[0]], &b = world.positions[t[1]], &c = world.positions[t[2]];
+  const TriangleClosest ref = closestPointOnTriangle(p, a, b, c);
+  const Vec3 from_bary = hit.barycentric[0] * a + hit.barycentric[1] * b + hit.barycentric[2] * c;
+  failures.check(std::abs(std::sqrt(ref.squared_distance) - hit.distance) <= kTolerance &&
+                     (ref.point - hit.point).norm() <= 1e-9 && (from_bary - hit.point).norm() <= 1e-9,
+                 [&] {
+                   return "point " + text(p) + ": hit on triangle " + std::to_string(hit.triangle) + " at " +
+                          text(hit.point) + " distance " + std::to_string(hit.distance) +
+                          " but that triangle's closest point is " + text(ref.point);
+                 });
+  // Feature consistent with the barycentric coordinates.
+  const Vec3& w = hit.barycentric;
+  bool feature_ok = true;
+  switch (hit.feature) {
+    case Feature::kVertex0: feature_ok = w[0] > 1 - 1e-9; break;
+    case Feature::kVertex1: feature_ok = w[1] > 1 - 1e-9; break;
+    case Feature::kVertex2: feature_ok = w[2] > 1 - 1e-9; break;
+    case Feature::kEdge01: feature_ok = w[2] < 1e-9; break;
+    case Feature::kEdge12: feature_ok = w[0] < 1e-9; break;
+    case Feature::kEdge20: feature_ok = w[1] < 1e-9; break;
+    case Feature::kFace: feature_ok = w.minCoeff() > -1e-12; break;
+  }
+  failures.check(feature_ok, [&] { return "feature inconsistent with barycentric " + text(w); });
+  failures.check(std::abs(hit.direction.norm() - 1) <= 1e-12, [&] { return "direction not unit: " + text(hit.direction); });
+  if (hit.distance > 1e-9)
+    failures.check((hit.direction - (p - hit.point) / hit.distance).norm() <= 1e-6,
+                   [&] { return "direction " + text(hit.direction) + " is not (p - point) / distance"; });
+  failures.check(hit.closed_body == it->second.closed, [&] { return "closed_body flag wrong"; });
+  failures.check(hit.closed_body || hit.sign == HitSign::kUnsigned, [&] { return "open body answered signed"; });
+  failures.check(hit.signed_distance == (hit.sign == HitSign::kInside ? -hit.distance : hit.distance),
+                 [&] { return "signed_distance inconsistent with sign"; });
+}
+
+// Every point of a step against brute force over all bodies and triangles.
+void checkStep(const Twin& twin, const std::vector<Vec3>& points, double d, QueryMode mode,
+               const StepResult& result, Failures& failures) {
+  REQUIRE(result.size() == points.size());
+  for (size_t i = 0; i < points.size(); ++i) {
+    const Vec3& p = points[i];
+    failures.check(result.status(i) == PointStatus::kOk, [&] { return "status not ok"; });
+    if (mode == QueryMode::kClosest) {
+      double best = kInf;
+      for (const auto& [slot, ref] : twin.bodies) best = std::min(best, bruteForceClosest(ref.world, p).distance);
+      const DistanceHit* hit = result.closest(i);
+      if (best <= d - kTolerance) {
+        failures.check(hit != nullptr, [&] { return "point " + text(p) + ": no hit, brute force " + std::to_string(best); });
+      } else if (best > d + kTolerance) {
+        failures.check(hit == nullptr, [&] { return "point " + text(p) + ": hit beyond the distance"; });
+      }
+      if (hit) {
+        failures.check(std::abs(hit->distance - best) <= kTolerance, [&] {
+          return "point " + text(p) + ": distance " + std::to_string(hit->distance) + ", brute force " +
+                 std::to_string(best);
+        });
+        checkHitFields(twin, p, *hit, failures);
+      }
+    } else {
+      // Brute force: (slot, triangle) -> distance of every triangle within d + tolerance.
+      std::map<std::pair<uint32_t, TriangleIndex>, double> expected;
+      for (const auto& [slot, ref] : twin.bodies)
+        for (const BruteHit& h : bruteForceWithin(ref.world, p, d + kTolerance))
+          expected[{slot, h.triangle}] = h.distance;
+      const auto hits = result.hits(i);
+      size_t found_inner = 0, inner = 0;
+      for (const auto& [key, distance] : expected) inner += distance <= d - kTolerance;
+      for (size_t k = 0; k < hits.size(); ++k) {
+        const DistanceHit& h = hits[k];
+        auto it = expected.find({h.body.index, h.triangle});
+        failures.check(it != expected.end() && std::abs(it->second - h.distance) <= kTolerance, [&] {
+          return "point " + text(p) + ": hit on body " + std::to_string(h.body.index) + " triangle " +
+                 std::to_string(h.triangle) + " not within the distance by brute force";
+        });
+        if (it != expected.end() && it->second <= d - kTolerance) ++found_inner;
+        if (k > 0) failures.check(hits[k - 1].distance <= h.distance, [&] { return "hits not sorted"; });
+        checkHitFields(twin, p, h, failures);
+      }
+      failures.check(found_inner == inner, [&] {
+        return "point " + text(p) + ": " + std::to_string(found_inner) + " of " + std::to_string(inner) +
+               " brute-force hits found";
+      });
+    }
+  }
+}
+
+}  // namespace
+
+TEST_CASE("service equals brute force step by step, rigid, key-framed and deforming bodies, 1 and 2 threads",
+          "[service]") {
+  Twin twin;
+  const Mesh sphere = scenes::icosphere(2, 1.0);
+  const Mesh torus = scenes::torus(1.0, 0.3, 24, 12);
+  const Mesh plane = scenes::gridPlane(6, 3.0);
+  const Mesh small_sphere = scenes::icosphere(2, 0.6, Vec3(-1.6, 0.6, 0.1));
+  const Mesh small_torus = scenes::torus(0.6, 0.2, 16, 8);
+  const auto h_sphere = twin.one.hierarchyFor(sphere);
+  const auto h_torus = twin.one.hierarchyFor(torus);
+  const auto h_plane = twin.one.hierarchyFor(plane);
+  const auto h_small_sphere = twin.one.hierarchyFor(small_sphere);
+  const auto h_small_torus = twin.one.hierarchyFor(small_torus);
+
+  const BodyHandle b_sphere = twin.addRigid(h_sphere, makePose(0.3, Vec3(1, 2, 3), Vec3(0, 0, 0)));
+  BodyHandle b_torus = twin.addRigid(h_torus, makePose(1.1, Vec3(1, 0, 0), Vec3(1.4, 0.2, 0)));
+  const BodyHandle b_plane = twin.addRigid(h_plane, makePose(0.05, Vec3(0, 1, 0), Vec3(0, 0, -1.15)));
+  const BodyHandle b_sphere2 = twin.addRigid(h_sphere, makePose(-0.7, Vec3(0, 0, 1), Vec3(0.3, 1.9, 0.4)));
+  std::vector<std::vector<Vec3>> frames;
+  for (int f = 0; f < 3; ++f)
+    frames.push_back(wave(small_sphere.positions, Vec3(-1.6, 0.6, 0.1), 0.12 * f, 0.7 * f));
+  const BodyHandle b_key = twin.addKeyframed(h_small_sphere, frames);
+  const Vec3 deform_center(0.2, -1.6, 0.2);
+  const std::vector<Vec3> torus_rest = transformed(small_torus.positions, makePose(0.4, Vec3(0, 1, 1), deform_center));
+  const BodyHandle b_deform = twin.addDeforming(h_small_torus, 0.01, torus_rest);
+  REQUIRE(twin.one.bodyCount() == 6);
+  CHECK(&twin.one.shape(b_sphere) == &twin.one.shape(b_sphere2));  // one shape per hierarchy
+  CHECK_FALSE(twin.one.shape(b_plane).closed());
+  CHECK(twin.one.shape(b_torus).closed());
+
+  // Points: a cloud over the scene moving a little each step.
+  Random random(7);
+  const size_t n = 700;
+  std::vector<Vec3> points(n), velocity(n);
+  for (size_t i = 0; i < n; ++i) {
+    points[i] = random.inBox(Vec3(-3, -3, -2), Vec3(3, 3, 2));
+    velocity[i] = 0.01 * Vec3(random.uniform(-1, 1), random.uniform(-1, 1), random.uniform(-1, 1));
+  }
+
+  Failures closest("closest vs brute force"), within("within vs brute force"), identical("1 vs 2 threads");
+  StepResult r1, r2;
+  uint64_t certified = 0, warm = 0, culled = 0;
+  size_t reanchored = 0;
+  const int steps = 7;
+  for (int s = 0; s < steps; ++s) {
+    INFO("step " << s);
+    // Move the bodies.
+    twin.setPose(b_sphere, makePose(0.3 + 0.02 * s, Vec3(1, 2, 3), Vec3(0.01 * s, 0, 0)));
+    twin.setPose(b_plane, makePose(0.05, Vec3(0, 1, 0), Vec3(0, 0, -1.15 + 0.01 * s)));
+    twin.setTime(b_key, 0.33 * s);
+    const PositionsUpdate u = twin.setPositions(b_deform, wave(torus_rest, deform_center, 0.004 * s * s, 0.3 * s));
+    reanchored += u.reanchored;
+    if (s == 3) {
+      // Remove a body mid-run; its slot is reused by a new body with a new generation.
+      const BodyHandle old_torus = b_torus;
+      twin.remove(b_torus);
+      CHECK_FALSE(twin.one.contains(old_torus));
+      CHECK_THROWS_AS(twin.one.setPose(old_torus, Eigen::Isometry3d::Identity()), std::invalid_argument);
+      b_torus = twin.addRigid(h_torus, makePose(0.2, Vec3(0, 1, 0), Vec3(1.2, -0.3, 0.3)));
+      CHECK(b_torus.index == old_torus.index);
+      CHECK(b_torus.generation != old_torus.generation);
+      CHECK_THROWS_WITH(twin.one.setPose(old_torus, Eigen::Isometry3d::Identity()),
+                        Catch::Contains("stale body handle"));
+    }
+    for (size_t i = 0; i < n; ++i) points[i] += velocity[i];
+    const PointMatrix matrix = toMatrix(points);
+    // The last step asks for everything (infinite distance).
+    const double d = s == steps - 1 ? kInf : 0.35;
+
+    twin.one.step(matrix, d, QueryMode::kClosest, r1);
+    twin.two.step(matrix, d, QueryMode::kClosest, r2);
+    checkIdentical(r1, r2, identical);
+    checkStep(twin, points, d, QueryMode::kClosest, r1, closest);
+    CHECK(r1.stats().states == r1.stats().pairs);
+    CHECK(twin.one.coherentStates() == r1.stats().pairs);
+    certified += r1.stats().certified_pairs;
+    warm += r1.stats().warm_pairs;
+    culled += r1.stats().culled_pairs;
+
+    if (d < kInf) {
+      twin.one.step(matrix, d, QueryMode::kWithin, r1);
+      twin.two.step(matrix, d, QueryMode::kWithin, r2);
+      checkIdentical(r1, r2, identical);
+      checkStep(twin, points, d, QueryMode::kWithin, r1, within);
+    }
+  }
+  // The coherent states are used: warm pairs, and answers from the certificate.
+  CHECK(warm > 0);
+  CHECK(certified > 0);
+  CHECK(culled > 0);      // pairs proven out of reach were skipped (and the answers still match)
+  CHECK(reanchored > 0);  // the deformation outgrew its bound at least once
+  CHECK(closest.checks() > 1000);
+  CHECK(within.checks() > 1000);
+}
+
+TEST_CASE("sign from pseudonormals equals the winding number on closed meshes", "[service][sign]") {
+  struct Case {
+    std::string name;
+    Mesh mesh;
+    size_t points;
+  };
+  std::vector<Case> cases;
+  cases.push_back({"icosphere", scenes::icosphere(3, 1.0), 1500});
+  cases.push_back({"torus", scenes::torus(1.0, 0.35, 32, 16), 1500});
+  if (const Mesh* armadillo = realMesh("armadillo")) cases.push_back({"armadillo", *armadillo, 200});
+  for (const Case& c : cases) {
+    INFO(c.name);
+    DistanceService service(ServiceOptions{2, 64});
+    const auto hierarchy = service.hierarchyFor(c.mesh);
+    REQUIRE(service.shapeFor(hierarchy)->closed());
+    // Rigid at a pose, deforming (a rigid motion given as positions, pseudonormals on demand)
+    // and key-framed (two frames of a non-rigid wave).
+    const Eigen::Isometry3d pose = makePose(0.8, Vec3(1, -1, 2), Vec3(0.5, -0.25, 2));
+    const BodyHandle rigid = service.addRigid(hierarchy, pose);
+    const std::vector<Vec3> rest = c.mesh.positions;
+    Vec3 lower, upper;
+    meshBounds(c.mesh, lower, upper);
+    const double diagonal = (upper - lower).norm();
+    const Vec3 center = 0.5 * (lower + upper);
+    const Eigen::Isometry3d pose2 = makePose(-0.5, Vec3(0, 1, 0), Vec3(3 * diagonal, 0, 0));
+    const std::vector<Vec3> moved = transformed(rest, pose2);
+    const BodyHandle deforming = service.addDeforming(hierarchy, 0.0, moved);
+    const Eigen::Isometry3d pose3 = makePose(0, Vec3(0, 0, 1), Vec3(0, 3 * diagonal, 0));
+    const std::vector<std::vector<Vec3>> frames = {transformed(rest, pose3),
+                                                   transformed(wave(rest, center, 0.03, 0.5, diagonal), pose3)};
+    const BodyHandle keyframed = service.addKeyframed(hierarchy, frames, 0.5);
+
+    struct Placement {
+      BodyHandle body;
+      Mesh world;
+      const char* what;
+    };
+    std::vector<Placement> placements = {{rigid, withPositions(c.mesh, transformed(rest, pose)), "rigid"},
+                                         {deforming, withPositions(c.mesh, moved), "deforming"},
+                                         {keyframed, withPositions(c.mesh, service.positions(keyframed)), "key-framed"}};
+    for (const Placement& placement : placements) {
+      INFO(placement.what);
+      // Near-surface points (both sides) and points in the bounding box.
+      std::vector<Vec3> points = scenes::nearSurfacePoints(placement.world, c.points / 2, 0.01, 11);
+      const std::vector<Vec3> box = scenes::randomPointsInBox(placement.world, c.points - points.size(), 0.05, 12);
+      points.insert(points.end(), box.begin(), box.end());
+      const StepResult result = service.step(toMatrix(points), kInf, QueryMode::kClosest);
+      Failures failures(std::string("sign on ") + c.name);
+      size_t inside = 0, outside = 0;
+      for (size_t i = 0; i < points.size(); ++i) {
+        const DistanceHit* hit = result.closest(i);
+        REQUIRE(hit != nullptr);
+        if (hit->body != placement.body) continue;  // nearer to another placement (not here)
+        const double w = windingNumber(placement.world, points[i]);
+        if (hit->distance < 1e-9 || std::abs(w - 0.5) < 0.25) continue;  // on the surface
+        const bool inside_expected = w > 0.5;
+        (inside_expected ? inside : outside) += 1;
+        failures.check(hit->sign == (inside_expected ? HitSign::kInside : HitSign::kOutside), [&] {
+          return "point " + text(points[i]) + ": winding number " + std::to_string(w) + ", distance " +
+                 std::to_string(hit->distance) + ", sign " + std::to_string(int(hit->sign));
+        });
+      }
+      CHECK(inside > points.size() / 10);
+      CHECK(outside > points.size() / 10);
+    }
+  }
+}
+
+TEST_CASE("open meshes answer unsigned; distance 0 uses the feature's pseudonormal", "[service][sign]") {
+  DistanceService service;
+  const Mesh plane = scenes::gridPlane(4, 2.0);
+  const Mesh sphere = scenes::icosphere(2, 1.0, Vec3(0, 0, 5));
+  const BodyHandle b_plane = service.addRigid(service.hierarchyFor(plane));
+  const BodyHandle b_sphere = service.addRigid(service.hierarchyFor(sphere));
+  CHECK_FALSE(service.shape(b_plane).closed());
+  CHECK_THAT(service.shape(b_plane).openReason(), Catch::Contains("boundary"));
+  CHECK(service.shape(b_sphere).openReason().empty());
+
+  std::vector<Vec3> points = {Vec3(0.1, 0.2, 0.3), Vec3(0.1, 0.2, -0.3),
+                              sphere.positions[sphere.triangles[0][0]],  // a vertex: distance 0
+                              Vec3(0.0, 0.0, 0.0),                       // on the plane
+                              Vec3(0, 0, 5.2)};                          // inside the sphere
+  const StepResult r = service.step(toMatrix(points), 10.0, QueryMode::kClosest);
+  for (size_t i : {size_t(0), size_t(1), size_t(3)}) {
+    const DistanceHit* hit = r.closest(i);
+    REQUIRE(hit);
+    CHECK(hit->body == b_plane);
+    CHECK(hit->sign == HitSign::kUnsigned);
+    CHECK_FALSE(hit->closed_body);
+    CHECK(hit->signed_distance == hit->distance);
+  }
+  CHECK(r.closest(1)->direction.isApprox(Vec3(0, 0, -1), 1e-12));
+  // On the plane: distance 0, direction = the face normal (+z).
+  CHECK(r.closest(3)->distance == 0);
+  CHECK(r.closest(3)->direction.isApprox(Vec3(0, 0, 1), 1e-12));
+  // At a sphere vertex: distance 0, outside, direction = the vertex pseudonormal (~ radial).
+  const DistanceHit* vertex = r.closest(2);
+  REQUIRE(vertex);
+  CHECK(vertex->body == b_sphere);
+  CHECK(vertex->distance == 0);
+  CHECK(vertex->sign == HitSign::kOutside);
+  CHECK((vertex->direction - (points[2] - Vec3(0, 0, 5)).normalized()).norm() < 1e-2);
+  CHECK(std::abs(vertex->direction.norm() - 1) < 1e-12);
+  const DistanceHit* inside = r.closest(4);
+  REQUIRE(inside);
+  CHECK(inside->sign == HitSign::kInside);
+  CHECK(inside->signed_distance == -inside->distance);
+  CHECK(inside->distance == Approx(0.8).margin(0.05));
+}
+
+TEST_CASE("pseudonormals on demand equal the precomputed rest tables", "[service][sign]") {
+  for (const Mesh& mesh : {scenes::torus(1.0, 0.3, 12, 7), scenes::icosphere(1), scenes::gridPlane(3)}) {
+    INFO(mesh.name);
+    const auto shape = BodyShape::build(Hierarchy::build(mesh));
+    const Feature features[] = {Feature::kVertex0, Feature::kVertex1, Feature::kVertex2, Feature::kEdge01,
+                                Feature::kEdge12,  Feature::kEdge20,  Feature::kFace};
+    Failures failures("pseudonormal " + mesh.name);
+    for (TriangleIndex t = 0; t < mesh.triangles.size(); ++t)
+      for (Feature f : features) {
+        const Vec3 a = shape->restPseudonormal(t, f);
+        const Vec3 b = shape->pseudonormal(t, f, mesh.positions.data());
+        failures.check((a - b).norm() <= 1e-12 * std::max(1.0, a.norm()), [&] { return text(a) + " vs " + text(b); });
+      }
+    // Closed meshes: every vertex pseudonormal points away from the centre (convex shapes).
+    if (shape->closed() && mesh.name.find("icosphere") != std::string::npos)
+      for (VertexIndex v = 0; v < mesh.positions.size(); ++v)
+        CHECK(shape->restVertexNormals()[v].dot(mesh.positions[v]) > 0);
+  }
+}
+
+TEST_CASE("broadphase equals its reference", "[service][broadphase]") {
+  Random random(3);
+  for (size_t count : {size_t(1), size_t(3), size_t(4), size_t(17), size_t(64)}) {
+    Broadphase flat;
+    BroadphaseReference reference;
+    flat.resize(count);
+    reference.boxes.resize(count);
+    for (size_t s = 0; s < count; ++s) {
+      Box3 box;
+      if (random.uniform() < 0.85) {  // else empty
+        const Vec3 a = random.inBox(Vec3::Constant(-5), Vec3::Constant(5));
+        const Vec3 b = a + random.inBox(Vec3::Zero(), Vec3::Constant(3));
+        box.lower = a;
+        box.upper = b;
+      }
+      flat.set(s, box);
+      reference.boxes[s] = box;
+    }
+    std::vector<uint32_t> out_flat(count), out_ref(count);
+    for (int i = 0; i < 2000; ++i) {
+      const Vec3 p = random.inBox(Vec3::Constant(-8), Vec3::Constant(8));
+      for (double d : {0.0, 0.5, 2.0, kInf}) {
+        const size_t nf = flat.candidates(p, d, out_flat.data());
+        const size_t nr = reference.candidates(p, d, out_ref.data());
+        REQUIRE(nf == nr);
+        for (size_t k = 0; k < nf; ++k) REQUIRE(out_flat[k] == out_ref[k]);
+      }
+    }
+    // A point on a box face at distance 0, and exactly at distance d from a corner.
+    if (!reference.boxes[0].empty()) {
+      const Box3 b = reference.boxes[0];
+      CHECK(flat.candidates(Vec3(b.lower.x(), b.upper.y(), 0.5 * (b.lower.z() + b.upper.z())), 0.0, out_flat.data()) >= 1);
+      CHECK(out_flat[0] == 0);
+      CHECK(flat.candidates(b.upper + Vec3(0.3, 0.4, 0), 0.5, out_flat.data()) >= 1);
+      CHECK(out_flat[0] == 0);
+    }
+  }
+}
+
+TEST_CASE("coherent states stay bounded; removed bodies drop theirs", "[service]") {
+  DistanceService service(ServiceOptions{2, 16});
+  const Mesh sphere = scenes::icosphere(3, 1.0);
+  const auto hierarchy = service.hierarchyFor(sphere);
+  const BodyHandle a = service.addRigid(hierarchy);
+  const BodyHandle b = service.addRigid(hierarchy, makePose(0, Vec3(0, 0, 1), Vec3(2.5, 0, 0)));
+  std::vector<Vec3> points = scenes::nearSurfacePoints(sphere, 500, 0.05, 5);
+  StepResult r;
+  for (int s = 0; s < 3; ++s) {
+    for (Vec3& p : points) p *= 1.001;
+    service.step(toMatrix(points), 0.3, QueryMode::kClosest, r);
+    CHECK(service.coherentStates() == r.stats().pairs);
+  }
+  const size_t near_states = service.coherentStates();
+  CHECK(near_states >= 500);
+  CHECK(r.stats().certified_pairs > 0);
+  // Far away: no body within reach, every state dropped.
+  std::vector<Vec3> far(points.size(), Vec3(100, 100, 100));
+  service.step(toMatrix(far), 0.3, QueryMode::kClosest, r);
+  CHECK(service.coherentStates() == 0);
+  CHECK(r.stats().pairs == 0);
+  // Fewer points: states of the points past the batch are dropped.
+  service.step(toMatrix(points), 0.3, QueryMode::kClosest, r);
+  service.step(toMatrix(std::vector<Vec3>(points.begin(), points.begin() + 40)), 0.3, QueryMode::kClosest, r);
+  CHECK(service.coherentStates() == r.stats().pairs);
+  CHECK(service.coherentStates() <= 80);
+  // Within mode keeps the states as they are.
+  const size_t kept = service.coherentStates();
+  service.step(toMatrix(points), 0.3, QueryMode::kWithin, r);
+  CHECK(service.coherentStates() == kept);
+  // A removed body: the next step has no pairs on it.
+  service.remove(b);
+  service.step(toMatrix(points), 0.3, QueryMode::kClosest, r);
+  for (size_t i = 0; i < points.size(); ++i)
+    if (const DistanceHit* hit = r.closest(i)) CHECK(hit->body == a);
+  CHECK(service.coherentStates() == r.stats().pairs);
+  service.clearCoherentStates();
+  CHECK(service.coherentStates() == 0);
+}
+
+TEST_CASE("shared tables: hierarchyFor caches by mesh, shapes shared per hierarchy", "[service]") {
+  DistanceService service;
+  const Mesh a = scenes::icosphere(1);
+  const Mesh b = scenes::icosphere(1);
+  const auto ha = service.hierarchyFor(a);
+  CHECK(service.hierarchyFor(a) == ha);
+  CHECK(service.hierarchyFor(b) != ha);
+  const BodyHandle x = service.addRigid(ha);
+  const BodyHandle y = service.addDeforming(ha, 0.1);
+  const BodyHandle z = service.addRigid(service.hierarchyFor(b));
+  CHECK(&service.shape(x) == &service.shape(y));
+  CHECK(&service.shape(x) != &service.shape(z));
+  CHECK(service.shapeFor(ha).get() == &service.shape(x));
+  service.forgetMesh(a);
+  CHECK(service.hierarchyFor(a) != ha);  // rebuilt after forgetMesh
+  CHECK(service.kind(x) == BodyKind::kRigid);
+  CHECK(service.kind(y) == BodyKind::kDeforming);
+  CHECK(service.bodies().size() == 3);
+}
+
+TEST_CASE("bad input: NaN points, stale handles, wrong sizes, wrong kinds", "[service][errors]") {
+  DistanceService service(ServiceOptions{2, 8});
+  const Mesh sphere = scenes::icosphere(2);
+  const auto hierarchy = service.hierarchyFor(sphere);
+  const BodyHandle rigid = service.addRigid(hierarchy);
+  const BodyHandle deforming = service.addDeforming(hierarchy, 0.05);
+  const std::vector<std::vector<Vec3>> frames = {sphere.positions};
+  const BodyHandle keyframed = service.addKeyframed(hierarchy, frames);
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+
+  SECTION("NaN and infinite points get a per-point status and no hits; the others are answered") {
+    PointMatrix points(20, 3);
+    for (int i = 0; i < 20; ++i) points.row(i) << 1.1 + 0.01 * i, 0.0, 0.0;
+    points(3, 1) = nan;
+    points(7, 2) = kInf;
+    for (QueryMode mode : {QueryMode::kClosest, QueryMode::kWithin}) {
+      const StepResult r = service.step(points, 0.5, mode);
+      CHECK(r.stats().invalid_points == 2);
+      for (int i = 0; i < 20; ++i) {
+        if (i == 3 || i == 7) {
+          CHECK(r.status(i) == PointStatus::kNotFinite);
+          CHECK(r.hits(i).empty());
+        } else {
+          CHECK(r.status(i) == PointStatus::kOk);
+          CHECK_FALSE(r.hits(i).empty());
+        }
+      }
+    }
+  }
+  SECTION("bad max distance") {
+    const PointMatrix points = PointMatrix::Zero(2, 3);
+    CHECK_THROWS_AS(service.step(points, nan, QueryMode::kClosest), std::invalid_argument);
+    CHECK_THROWS_AS(service.step(points, -1.0, QueryMode::kClosest), std::invalid_argument);
+    CHECK(service.step(PointMatrix(0, 3), 1.0).size() == 0);
+  }
+  SECTION("stale handles are detected, never dereferenced") {
+    service.remove(deforming);
+    CHECK_FALSE(service.contains(deforming));
+    CHECK_THROWS_WITH(service.setPositions(deforming, sphere.positions), Catch::Contains("stale body handle"));
+    CHECK_THROWS_WITH(service.remove(deforming), Catch::Contains("stale body handle"));
+    CHECK_THROWS_WITH(service.kind(deforming), Catch::Contains("stale body handle"));
+    CHECK_THROWS_WITH(service.shape(BodyHandle{}), Catch::Contains("stale body handle"));
+    CHECK_THROWS_WITH(service.setPose(BodyHandle{99, 1}, Eigen::Isometry3d::Identity()),
+                      Catch::Contains("stale body handle"));
+    // The slot is reused with a new generation: the old handle stays stale.
+    const BodyHandle again = service.addDeforming(hierarchy, 0.05);
+    CHECK(again.index == deforming.index);
+    CHECK_THROWS_WITH(service.positions(deforming), Catch::Contains("stale body handle"));
+    CHECK(service.positions(again).size() == sphere.positions.size());
+  }
+  SECTION("positions of the wrong size or not finite: error, body unchanged") {
+    std::vector<Vec3> short_positions(sphere.positions.begin(), sphere.positions.end() - 1);
+    CHECK_THROWS_AS(service.setPositions(deforming, short_positions), std::invalid_argument);
+    CHECK_THROWS_AS(service.setPositions(deforming, PointMatrix::Zero(3, 3)), std::invalid_argument);
+    std::vector<Vec3> bad = sphere.positions;
+    bad[5].x() = nan;
+    CHECK_THROWS_AS(service.setPositions(deforming, bad), std::invalid_argument);
+    CHECK(service.positions(deforming) == sphere.positions);
+    CHECK_THROWS_AS(service.addKeyframed(hierarchy, {short_positions}), std::invalid_argument);
+    CHECK_THROWS_AS(service.addDeforming(hierarchy, -1.0), std::invalid_argument);
+    CHECK_THROWS_AS(service.addDeforming(hierarchy, 0.1, short_positions), std::invalid_argument);
+    CHECK_THROWS_AS(service.addRigid(nullptr), std::invalid_argument);
+    CHECK_THROWS_AS(service.setTime(keyframed, nan), std::invalid_argument);
+    Eigen::Isometry3d scaled = Eigen::Isometry3d::Identity();
+    scaled.linear() *= 2;
+    CHECK_THROWS_AS(service.setPose(rigid, scaled), std::invalid_argument);
+  }
+  SECTION("a setter of the wrong kind") {
+    CHECK_THROWS_WITH(service.setPose(deforming, Eigen::Isometry3d::Identity()), Catch::Contains("not rigid"));
+    CHECK_THROWS_AS(service.setTime(rigid, 0.5), std::invalid_argument);
+    CHECK_THROWS_AS(service.setPositions(keyframed, sphere.positions), std::invalid_argument);
+    CHECK_THROWS_AS(service.positions(rigid), std::invalid_argument);
+  }
+  SECTION("a deformation past the bound re-anchors, and answers stay exact") {
+    std::vector<Vec3> moved = sphere.positions;
+    for (Vec3& x : moved) x *= 1.02;  // 0.02 from the anchor: within 0.05
+    CHECK_FALSE(service.setPositions(deforming, moved).reanchored);
+    for (Vec3& x : moved) x *= 1.1;   // ~0.12: past the bound
+    const PositionsUpdate u = service.setPositions(deforming, moved);
+    CHECK(u.reanchored);
+    CHECK(u.excess > 0);
+    CHECK(u.worst_vertex < moved.size());
+    service.remove(rigid);
+    service.remove(keyframed);
+    const Mesh world = withPositions(sphere, moved);
+    const std::vector<Vec3> points = scenes::randomPointsInBox(world, 200, 0.2, 3);
+    const StepResult r = service.step(toMatrix(points), kInf);
+    for (size_t i = 0; i < points.size(); ++i) {
+      REQUIRE(r.closest(i));
+      CHECK(r.closest(i)->distance == Approx(bruteForceClosest(world, points[i]).distance).margin(1e-12));
+    }
+  }
+}
