@@ -11,6 +11,7 @@ namespace meshsweeper::cli {
 
 const char kClosestHelp[] =
     "Usage: meshsweep closest MESH POINTS [--out FILE] [--tolerance T | --k N | --within D]\n"
+    "                         [--path]\n"
     "\n"
     "Reads MESH (OFF, OBJ, PLY or STL) and POINTS (text, one 'x y z' per line, '#' comments;\n"
     "'-' reads standard input), builds the hierarchy once and answers every point with one\n"
@@ -24,6 +25,10 @@ const char kClosestHelp[] =
     "  --k N           the N closest triangles (N >= 1), one row each    mode \"k\"\n"
     "  --within D      every triangle at distance <= D, one row each     mode \"within\"\n"
     "  --out FILE      write the CSV to FILE instead of standard output\n"
+    "  --path          the points are consecutive samples of one moving point: answer them\n"
+    "                  with one coherent stream (closest: the certified candidate set;\n"
+    "                  --tolerance and --k: the paper's dynamic front). Same answers, less\n"
+    "                  work per point; the summary adds the coherence counters\n"
     "\n"
     "CSV columns (header line first):\n"
     "  point,rank,distance,lower,upper,triangle,x,y,z,b0,b1,b2\n"
@@ -38,7 +43,8 @@ const char kClosestHelp[] =
     "\n"
     "A one-line JSON summary goes to standard error:\n"
     "  {\"mesh\": ..., \"vertices\": ..., \"triangles\": ..., \"points\": ..., \"rows\": ...,\n"
-    "   \"build_seconds\": ..., \"query_seconds\": ..., \"mode\": ...}\n"
+    "   \"build_seconds\": ..., \"query_seconds\": ..., \"mode\": ..., \"path\": ...}\n"
+    "  with --path also \"certified\", \"rebuilds\", \"front_resets\" (coherence counters)\n"
     "\n"
     "Exit status: 0 success, 1 unreadable/invalid input file or unwritable output,\n"
     "2 bad command line.\n";
@@ -80,7 +86,8 @@ Row rowFromClosest(uint32_t point, const ClosestPoint& c) {
 
 int runClosest(int argc, char** argv, int first) {
   const Args args("closest", argc, argv, first,
-                  {{"--out", true}, {"--tolerance", true}, {"--k", true}, {"--within", true}});
+                  {{"--out", true}, {"--tolerance", true}, {"--k", true}, {"--within", true},
+                   {"--path", false}});
   args.expectPositional({"MESH", "POINTS"});
   const std::string& mesh_path = args.positional()[0];
   const std::string& points_path = args.positional()[1];
@@ -106,6 +113,7 @@ int runClosest(int argc, char** argv, int first) {
   }
   if (modes > 1)
     throw UsageError("closest: --tolerance, --k and --within cannot be combined");
+  const bool path = args.has("--path");
 
   const Mesh mesh = readMesh(mesh_path);
   const std::vector<Vec3> points = readPoints(points_path);
@@ -127,14 +135,19 @@ int runClosest(int argc, char** argv, int first) {
   for (uint32_t i = 0; i < points.size(); ++i) {
     const Vec3& p = points[i];
     switch (mode) {
-      case Mode::kClosest: rows.push_back(rowFromClosest(i, stream.closest(p))); break;
+      case Mode::kClosest:
+        rows.push_back(rowFromClosest(i, path ? stream.closestCoherent(p) : stream.closest(p)));
+        break;
       case Mode::kAnytime:
-        rows.push_back(rowFromClosest(i, stream.closestWithin(p, tolerance)));
+        rows.push_back(rowFromClosest(i, path ? stream.closestWithinCoherent(p, tolerance)
+                                              : stream.closestWithin(p, tolerance)));
         break;
       case Mode::kK:
       case Mode::kWithin:
         hits.clear();
-        if (mode == Mode::kK)
+        if (mode == Mode::kK && path)
+          stream.kClosestCoherent(p, k_effective, hits);
+        else if (mode == Mode::kK)
           stream.kClosest(p, k_effective, hits);
         else
           stream.within(p, within_distance, hits);
@@ -153,12 +166,19 @@ int runClosest(int argc, char** argv, int first) {
   }
   out.close();
 
+  std::string coherence;
+  if (path) {
+    const CoherenceCounters& c = stream.coherence();
+    coherence = ", \"certified\": " + std::to_string(c.certified) + ", \"rebuilds\": " +
+                std::to_string(c.rebuilds) + ", \"front_resets\": " + std::to_string(c.front_resets);
+  }
   std::fprintf(stderr,
                "{\"mesh\": %s, \"vertices\": %zu, \"triangles\": %zu, \"points\": %zu, "
                "\"rows\": %zu, \"build_seconds\": %.6f, \"query_seconds\": %.6f, "
-               "\"mode\": \"%s\"}\n",
+               "\"mode\": \"%s\", \"path\": %s%s}\n",
                jsonString(mesh_path).c_str(), mesh.positions.size(), mesh.triangles.size(),
-               points.size(), rows.size(), build_seconds, query_seconds, modeName(mode));
+               points.size(), rows.size(), build_seconds, query_seconds, modeName(mode),
+               path ? "true" : "false", coherence.c_str());
   return kExitOk;
 }
 

@@ -197,6 +197,23 @@ if(DATA_DIR AND EXISTS "${DATA_DIR}/armadillo.off")
     --out real.csv ERR "\"points\": 200" "\"rows\": 200")
   check(real_k RC 0 ARGS closest "${DATA_DIR}/armadillo.off" real_points.txt --k 3
     --out real_k.csv ERR "\"rows\": 600")
+  # --path answers with a coherent stream: the same CSV, byte for byte, for every mode.
+  check(real_path RC 0 ARGS closest "${DATA_DIR}/armadillo.off" real_points.txt --path
+    --out real_path.csv ERR "\"path\": true" "\"certified\": ")
+  check(real_path_k RC 0 ARGS closest "${DATA_DIR}/armadillo.off" real_points.txt --path --k 3
+    --out real_path_k.csv ERR "\"rows\": 600")
+  foreach(pair "real.csv;real_path.csv" "real_k.csv;real_path_k.csv")
+    list(GET pair 0 plain)
+    list(GET pair 1 coherent)
+    file(READ "${WORK_DIR}/${plain}" plain_text)
+    file(READ "${WORK_DIR}/${coherent}" coherent_text)
+    if(plain_text STREQUAL coherent_text)
+      math(EXPR passed "${passed} + 1")
+    else()
+      message("FAIL ${coherent} differs from ${plain}")
+      math(EXPR failed "${failed} + 1")
+    endif()
+  endforeach()
 endif()
 
 message("meshsweep_cli: ${passed} passed, ${failed} failed")
