@@ -182,6 +182,13 @@ QueryStream::QueryStream(std::shared_ptr<const Hierarchy> hierarchy, CoherenceOp
   heap_.reserve(64);
 }
 
+size_t QueryStream::stateBytes() const {
+  return sizeof(*this) + stack_.capacity() * sizeof(StackEntry) + heap_.capacity() * sizeof(FrontEntry) +
+         set_faces_.capacity() * sizeof(TriangleIndex) + set_blocks_.capacity() * sizeof(TriangleBlock8) +
+         gathered_.capacity() * sizeof(gathered_[0]) + front_.capacity() * sizeof(DriftEntry) +
+         popped_.capacity() * sizeof(DriftEntry);
+}
+
 void QueryStream::setGeometry(const TreeGeometry* geometry) {
   geometry_ = geometry;
   reset();

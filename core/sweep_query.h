@@ -131,6 +131,9 @@ class QueryStream {
   const CoherenceCounters& coherence() const { return coherence_; }
   // Entries in the dynamic front (changing state, for memory reports).
   size_t frontSize() const { return front_.size(); }
+  // Bytes of changing state this stream holds (its object and the capacity of its buffers):
+  // the per-stream memory, nothing per vertex of the mesh.
+  size_t stateBytes() const;
 
  private:
   struct FrontEntry {

@@ -32,4 +32,8 @@ int runCheck(int argc, char** argv, int first);
 extern const char kHausdorffHelp[];
 int runHausdorff(int argc, char** argv, int first);
 
+// meshsweep info MESH [--queries N]
+extern const char kInfoHelp[];
+int runInfo(int argc, char** argv, int first);
+
 }  // namespace meshsweeper::cli

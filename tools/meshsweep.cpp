@@ -17,6 +17,14 @@ namespace {
 
 int runHelp(int argc, char** argv, int first);
 
+}  // namespace
+
+// meshsweep scene NAME [--out DIR] (scene_command.cpp).
+extern const char kSceneHelp[];
+int runScene(int argc, char** argv, int first);
+
+namespace {
+
 // The subcommands, in the order `meshsweep help` lists them.
 const Command kCommands[] = {
     {"closest", "closest points (or k closest / within-D triangles) of a mesh, as CSV",
@@ -26,6 +34,10 @@ const Command kCommands[] = {
     {"check", "cross-check exact distances against an OpenVDB distance grid", kCheckHelp, runCheck},
     {"hausdorff", "certified Hausdorff distance between two meshes (both directions, bounds)",
      kHausdorffHelp, runHausdorff},
+    {"info", "hierarchy of a mesh: build phases, tree shape, memory per triangle and per stream",
+     kInfoHelp, runInfo},
+    {"scene", "run a demo scene and write its picture (PNG): hausdorff, particle, cloth, all",
+     kSceneHelp, runScene},
     {"help", "show this help, or the usage of one command: meshsweep help COMMAND",
      "Usage: meshsweep help [COMMAND]\n", runHelp},
 };

@@ -197,6 +197,8 @@ if(DATA_DIR AND EXISTS "${DATA_DIR}/armadillo.off")
     --out real.csv ERR "\"points\": 200" "\"rows\": 200")
   check(real_k RC 0 ARGS closest "${DATA_DIR}/armadillo.off" real_points.txt --k 3
     --out real_k.csv ERR "\"rows\": 600")
+  check(real_info RC 0 ARGS info "${DATA_DIR}/armadillo.off" --queries 50
+    OUT "\"triangles\": 52000" "\"fixed_bytes_per_triangle\"" "\"stream_state_bytes\"")
   # --path answers with a coherent stream: the same CSV, byte for byte, for every mode.
   check(real_path RC 0 ARGS closest "${DATA_DIR}/armadillo.off" real_points.txt --path
     --out real_path.csv ERR "\"path\": true" "\"certified\": ")
