@@ -5,7 +5,8 @@
 //       for every live vertex v: candidate v -> u, u its nearest legal neighbour (cost r_v + |u - v|),
 //         or, when no edge contraction is legal, its nearest vertex in Morton order (no shared edge)
 //       sort the candidates by cost; apply each whose vertices are still free this round,
-//         then lock v's neighbours as sources (a maximal set of non-conflicting cheap contractions)
+//         (v must not have been a target this round, u must not have been contracted; legality
+//         is checked on the current mesh when applying)
 //       applying v -> u: r_u <- max(r_u, r_v + |u - v|); triangles of v's star become (u, a, b);
 //         a triangle holding u and v is deleted and adopted by a survivor holding its edge (u, a)
 //   cover tree: every original face is a leaf; a deleted triangle's node becomes a child of the
@@ -256,7 +257,7 @@ void Contractor::run(CoverTree& tree, std::vector<VertexIndex>& contracted_into,
 
   std::vector<Candidate> candidates;
   std::vector<uint64_t> order;
-  std::vector<uint8_t> locked(n, 0);  // [vertex] may not be a source (or is gone) this round
+  std::vector<uint8_t> locked(n, 0);  // [vertex] contracted or grown this round: not a source
   const uint32_t kMaxRounds = 10000;
   while (live_triangles_ > base_triangles_ && stats.rounds < kMaxRounds) {
     ++stats.rounds;
@@ -325,9 +326,6 @@ void Contractor::run(CoverTree& tree, std::vector<VertexIndex>& contracted_into,
       if (!findDeletions(cand.v, cand.u, deletions_)) continue;
       locked[cand.v] = 1;
       locked[cand.u] = 1;
-      forEachCorner(cand.v, [&](uint32_t c) {
-        for (int k = 0; k < 3; ++k) locked[tri_[3 * (c / 3) + k]] = 1;
-      });
       contracted_into[cand.v] = cand.u;
       apply(cand.v, cand.u, deletions_);
       ++applied;
