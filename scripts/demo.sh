@@ -25,3 +25,9 @@ echo "closest points: out/closest.csv"
 cat out/closest.json
 
 # 2. Hausdorff distance and scene pictures: added here by their issues.
+# Scene pictures (PNG): meshsweep scene NAME writes out/scenes/NAME.png and prints its bounds
+# and timings (see README "Scenes and pictures").
+for scene in hausdorff particle cloth; do
+  "$meshsweep" scene "$scene" --out out/scenes
+done
+echo "pictures (PNG): $root/out/scenes/hausdorff.png, particle.png, cloth.png"

@@ -36,4 +36,8 @@ int runHausdorff(int argc, char** argv, int first);
 extern const char kInfoHelp[];
 int runInfo(int argc, char** argv, int first);
 
+// meshsweep scene NAME [--out DIR]
+extern const char kSceneHelp[];
+int runScene(int argc, char** argv, int first);
+
 }  // namespace meshsweeper::cli

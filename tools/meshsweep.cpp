@@ -13,17 +13,10 @@
 #include <string>
 
 namespace meshsweeper::cli {
+
 namespace {
 
 int runHelp(int argc, char** argv, int first);
-
-}  // namespace
-
-// meshsweep scene NAME [--out DIR] (scene_command.cpp).
-extern const char kSceneHelp[];
-int runScene(int argc, char** argv, int first);
-
-namespace {
 
 // The subcommands, in the order `meshsweep help` lists them.
 const Command kCommands[] = {

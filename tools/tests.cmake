@@ -16,3 +16,12 @@ add_test(NAME install_consumer COMMAND ${CMAKE_COMMAND}
   -DBUILD_TYPE=${CMAKE_BUILD_TYPE}
   -P ${PROJECT_SOURCE_DIR}/tests/test_install.cmake)
 set_tests_properties(install_consumer PROPERTIES TIMEOUT 600)
+
+# Scene smoke test: `meshsweep scene particle` (about 0.2 s) writes a non-empty file that starts
+# with the PNG signature.
+if(TARGET meshsweep)
+  add_test(NAME meshsweep_scene_png COMMAND sh -c
+    "rm -rf \"$1\" && \"$0\" scene particle --out \"$1\" && test -s \"$1/particle.png\" && head -c 8 \"$1/particle.png\" | od -An -tx1 | tr -d ' \\n' | grep -qx 89504e470d0a1a0a"
+    $<TARGET_FILE:meshsweep> ${CMAKE_CURRENT_BINARY_DIR}/meshsweep_scene_png)
+  set_tests_properties(meshsweep_scene_png PROPERTIES TIMEOUT 60)
+endif()
