@@ -189,6 +189,25 @@ size_t QueryStream::stateBytes() const {
          popped_.capacity() * sizeof(DriftEntry);
 }
 
+void QueryStream::frontTriangles(std::vector<FrontTriangle>& out) const {
+  out.clear();
+  const TreeGeometry& g = geometry();
+  for (const DriftEntry& e : front_) {
+    FrontTriangle t;
+    if (e.lane < 8) {
+      t.corners = hierarchy_->mesh().triangles[e.ref];
+      t.face = true;
+    } else if (e.parent >= 0) {
+      const Node8& node = g.nodes[e.parent];
+      t.corners = {node.corner[0][e.slot], node.corner[1][e.slot], node.corner[2][e.slot]};
+      t.eps = node.eps[e.slot];
+    } else {
+      continue;  // the root, before the first refinement
+    }
+    out.push_back(t);
+  }
+}
+
 void QueryStream::setGeometry(const TreeGeometry* geometry) {
   geometry_ = geometry;
   reset();

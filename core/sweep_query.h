@@ -79,6 +79,15 @@ struct CoherentState {
   TriangleIndex faces[kCoherentSetSize];
 };
 
+// One entry of the dynamic front, for pictures and diagnostics: the triangle whose swept
+// volume bounds the entry (three original vertices) and its radius; an original face has
+// eps = 0 and `face` set.
+struct FrontTriangle {
+  Triangle corners{};
+  float eps = 0;
+  bool face = false;
+};
+
 class QueryStream {
  public:
   explicit QueryStream(std::shared_ptr<const Hierarchy> hierarchy, CoherenceOptions options = {});
@@ -131,6 +140,9 @@ class QueryStream {
   const CoherenceCounters& coherence() const { return coherence_; }
   // Entries in the dynamic front (changing state, for memory reports).
   size_t frontSize() const { return front_.size(); }
+  // The triangles of the dynamic front (the paper's refined mesh of Fig. 6): coarse slot
+  // triangles far from the point, original faces near it. Does not change the stream.
+  void frontTriangles(std::vector<FrontTriangle>& out) const;
   // Bytes of changing state this stream holds (its object and the capacity of its buffers):
   // the per-stream memory, nothing per vertex of the mesh.
   size_t stateBytes() const;

@@ -1,9 +1,9 @@
 // Scene "particle": the paper's Fig. 6, a particle falling onto a torus. The particle's
 // closest point is followed with the dynamic front (QueryStream::closestWithinCoherent, exact:
 // tolerance 0) along the whole fall; four frames of the fall are drawn side by side: the torus,
-// the particle, its closest point joined to it by a line, and in orange the faces within 1.2
-// times the particle's distance (QueryStream::within), the region the front has to refine.
-// The front's own entries are private to QueryStream; their number (frontSize()) is printed.
+// the particle, its closest point joined to it by a line, and the front itself: coarse slot
+// triangles as wireframe, original faces it reached in orange (QueryStream::frontTriangles).
+// The number of faces within 1.2 times the distance (the region to refine) is printed.
 #include "core/sweep_query.h"
 #include "scenes/procedural.h"
 #include "scenes/render.h"
@@ -27,7 +27,7 @@ std::string particleScene(const std::string& out_dir, std::FILE* log) {
   const int panel = 400, title_height = 40, caption_height = 76;
   Image canvas(4 * panel, panel + title_height + caption_height);
   std::vector<TriangleHit> near;
-  std::vector<char> highlighted(mesh.triangles.size());
+  std::vector<FrontTriangle> front;
   double query_seconds = 0;
   int frame = 0;
   std::fprintf(log, "particle: torus %zu triangles, %d steps of the fall\n", mesh.triangles.size(),
@@ -42,20 +42,36 @@ std::string particleScene(const std::string& out_dir, std::FILE* log) {
     if (step != frames[frame]) continue;
 
     stream.within(p, 1.2 * c.distance, near);
-    std::fill(highlighted.begin(), highlighted.end(), 0);
-    for (const TriangleHit& hit : near) highlighted[hit.triangle] = 1;
+    stream.frontTriangles(front);
+    size_t front_faces = 0;
+    for (const FrontTriangle& t : front) front_faces += t.face ? 1 : 0;
     std::fprintf(log, "particle: %6d %10.4f %8zu %12zu %12u\n", step, c.distance,
                  stream.frontSize(), near.size(), c.counters.triangles_tested);
 
     Image view(panel, panel);
     const Camera camera = Camera::framing(Vec3(0.35, 0, 0.55), 1.55, Vec3(0.35, -1.0, 0.55),
                                           Vec3::UnitZ(), panel, panel, 35);
-    const Colour grey(0.78, 0.78, 0.8), orange(1.0, 0.55, 0.1);
-    for (size_t t = 0; t < mesh.triangles.size(); ++t) {
-      const Triangle& tri = mesh.triangles[t];
-      const Colour& colour = highlighted[t] ? orange : grey;
-      view.drawTriangle(camera, mesh.positions[tri[0]], mesh.positions[tri[1]],
-                        mesh.positions[tri[2]], colour, colour, colour);
+    // The front itself (the paper's refined mesh) over a pale torus: coarse slot triangles as
+    // blue wireframe, the original faces the front has reached in orange.
+    const Colour pale(0.9, 0.9, 0.92), orange(1.0, 0.55, 0.1), edge(0.25, 0.3, 0.55);
+    for (const Triangle& tri : mesh.triangles)
+      view.drawTriangle(camera, mesh.positions[tri[0]], mesh.positions[tri[1]], mesh.positions[tri[2]],
+                        pale, pale, pale);
+    for (const FrontTriangle& t : front) {
+      if (!t.face) continue;
+      const Vec3& a = mesh.positions[t.corners[0]];
+      const Vec3& b = mesh.positions[t.corners[1]];
+      const Vec3& d = mesh.positions[t.corners[2]];
+      view.drawTriangle(camera, a, b, d, orange, orange, orange);
+    }
+    for (const FrontTriangle& t : front) {
+      if (t.face) continue;
+      const Vec3& a = mesh.positions[t.corners[0]];
+      const Vec3& b = mesh.positions[t.corners[1]];
+      const Vec3& d = mesh.positions[t.corners[2]];
+      view.drawLine(camera, a, b, edge, 1);
+      view.drawLine(camera, b, d, edge, 1);
+      view.drawLine(camera, d, a, edge, 1);
     }
     view.drawLine(camera, start, p, Colour(0.6, 0.6, 0.6), 1);
     view.drawLine(camera, p, c.point, Colour(0.1, 0.1, 0.1), 2);
@@ -63,8 +79,8 @@ std::string particleScene(const std::string& out_dir, std::FILE* log) {
     view.drawSphere(camera, p, 0.05, Colour(0.85, 0.1, 0.1));
     canvas.paste(view, frame * panel, title_height);
     char caption[160];
-    std::snprintf(caption, sizeof caption, "step %d: distance %.3f\nfront: %zu entries\nfaces within 1.2 d: %zu",
-                  step, c.distance, stream.frontSize(), near.size());
+    std::snprintf(caption, sizeof caption, "step %d: distance %.3f\nfront: %zu entries, %zu faces\nfaces within 1.2 d: %zu",
+                  step, c.distance, stream.frontSize(), front_faces, near.size());
     canvas.drawText(frame * panel + 12, title_height + panel + 4, caption, Colour(0, 0, 0), 2);
     if (frame > 0) canvas.fillRect(frame * panel, title_height, frame * panel + 1, title_height + panel,
                                    Colour(0.6, 0.6, 0.6));
@@ -79,8 +95,8 @@ std::string particleScene(const std::string& out_dir, std::FILE* log) {
                static_cast<unsigned long long>(coherence.front_resets),
                static_cast<unsigned long long>(coherence.recomputed));
   canvas.drawText(12, 8,
-                  "Particle falling onto a torus (paper Fig. 6): closest point (blue) by the dynamic "
-                  "front; orange: faces within 1.2 x distance",
+                  "Particle falling onto a torus (paper Fig. 6): the dynamic front (blue wireframe: "
+                  "coarse triangles, orange: original faces), closest point (blue dot)",
                   Colour(0, 0, 0), 2);
   const std::string path = out_dir + "/particle.png";
   canvas.writePng(path);
