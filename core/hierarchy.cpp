@@ -6,6 +6,7 @@
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <limits>
 #include <sstream>
@@ -20,6 +21,11 @@ std::string describe(const char* what, size_t node, int slot) {
 }
 
 }  // namespace
+
+uint64_t nextGeometryVersion() {
+  static std::atomic<uint64_t> counter{0};
+  return ++counter;
+}
 
 float boxMargin(double extent) {
   return static_cast<float>(std::max(1.0, extent) * std::ldexp(1.0, -19));
@@ -123,7 +129,7 @@ TreeGeometry Hierarchy::restGeometry() const {
   g.positions = mesh_.positions.data();
   g.center = center_;
   g.box_scale = box_scale_;
-  g.version = 0;
+  g.version = rest_version_;
   return g;
 }
 

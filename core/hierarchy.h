@@ -48,8 +48,13 @@ struct TreeGeometry {
   const Vec3* positions = nullptr;             // [vertex]
   Vec3 center = Vec3::Zero();                  // boxes hold (x - center) * box_scale in float
   double box_scale = 1;
-  uint64_t version = 0;                        // changes whenever the geometry changes
+  uint64_t version = 0;                        // unique in the process: a new value from
+                                               // nextGeometryVersion() whenever it changes
 };
+
+// A process-wide unique, never-zero geometry version (thread-safe). Every geometry, and every
+// change of one, takes a new value, so coherent state never mistakes one geometry for another.
+uint64_t nextGeometryVersion();
 
 struct BuildOptions {
   // Stop contracting when this many triangles remain (the base mesh; its triangles are roots).
@@ -126,6 +131,7 @@ class Hierarchy {
   std::vector<uint32_t> leaf_begin_, leaf_end_;  // [node]
   std::vector<int32_t> parent_;                  // [node]
   std::vector<VertexIndex> contracted_into_;     // [vertex]
+  uint64_t rest_version_ = nextGeometryVersion();
 };
 
 // Recomputes slot bounds over the hierarchy's topology for other vertex positions (a moved or

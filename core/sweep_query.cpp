@@ -214,6 +214,7 @@ void QueryStream::setGeometry(const TreeGeometry* geometry) {
 }
 
 void QueryStream::reset() {
+  coherence_ = {};
   has_set_ = false;
   has_last_ = false;
   has_front_ = false;
@@ -374,7 +375,8 @@ ClosestPoint QueryStream::closestCoherent(const Vec3& p) {
     ++coherence_.certified;
   } else {
     ++coherence_.rebuilds;
-    const double reach = 2 * options_.reach_steps * mean_step_;
+    // A stationary point still gets a certificate: a reach of at least 1e-6 of the mesh size.
+    const double reach = 2 * std::max(options_.reach_steps * mean_step_, 1e-6 / g.box_scale);
     double start2 = kInf;
     face = kInvalidIndex;
     if (has_last_ && last_face_ != kInvalidIndex && set_version_ == g.version) {
@@ -444,18 +446,29 @@ ClosestPoint QueryStream::closestCoherent(const Vec3& p, CoherentState& state, b
   if (warm && state.count > 0 && state.version == g.version) {
     const double moved = (p - state.anchor).norm();
     if (moved < state.reach) {
+      // The candidates, gathered eight at a time into the block kernel.
       double best2 = kInf;
-      for (uint32_t i = 0; i < state.count; ++i) {
-        const Triangle& t = mesh.triangles[state.faces[i]];
-        const double d2 = squaredDistanceToTriangle(p, g.positions[t[0]], g.positions[t[1]], g.positions[t[2]]);
-        if (d2 < best2 || (d2 == best2 && state.faces[i] < face)) { best2 = d2; face = state.faces[i]; }
+      double exact[8];
+      for (uint32_t first = 0; first < state.count; first += 8) {
+        const uint32_t lanes = std::min<uint32_t>(8, state.count - first);
+        for (uint32_t lane = 0; lane < 8; ++lane) {
+          const Triangle& t = mesh.triangles[state.faces[first + (lane < lanes ? lane : 0)]];
+          for (int k = 0; k < 3; ++k)
+            for (int axis = 0; axis < 3; ++axis) gather_.v[k][axis][lane] = g.positions[t[k]][axis];
+        }
+        squaredDistancesToBlock(p, gather_, exact);
+        for (uint32_t lane = 0; lane < lanes; ++lane) {
+          const TriangleIndex f = state.faces[first + lane];
+          if (exact[lane] < best2 || (exact[lane] == best2 && f < face)) { best2 = exact[lane]; face = f; }
+        }
       }
       counters_.triangles_tested = state.count;
       certified = std::sqrt(best2) + moved < state.reach * (1 - 1e-9);
     }
   }
   if (!certified) {
-    const double reach = 2.0 * state.reach_steps * state.mean_step;
+    const double reach = 2.0 * std::max(static_cast<double>(state.reach_steps) * state.mean_step,
+                                        1e-6 / g.box_scale);
     double start2 = kInf;
     face = kInvalidIndex;
     if (warm) {
@@ -821,6 +834,9 @@ void QueryStream::kClosestCoherent(const Vec3& p, size_t k, std::vector<Triangle
   TriangleIndex upper_face = kInvalidIndex;
   VertexIndex upper_vertex = kInvalidIndex;
   frontRefine(p, sp.q, sp.far, upper, upper_face, upper_vertex, false, 0, k, &out);
+  // Front keys carry the drift offset, which can merge distances one ulp apart: order the
+  // answer by the exact distances (ties by triangle index), as kClosest does.
+  std::sort(out.begin(), out.end(), hitBefore);
 }
 
 }  // namespace meshsweeper

@@ -26,7 +26,7 @@ DeformingBody::DeformingBody(std::shared_ptr<const Hierarchy> hierarchy)
   geometry_.positions = positions_.data();
   geometry_.center = h.center();
   geometry_.box_scale = h.boxScale();
-  geometry_.version = 1;
+  geometry_.version = nextGeometryVersion();
 }
 
 void DeformingBody::checkSize(size_t count, const char* what) const {
@@ -46,7 +46,7 @@ void DeformingBody::anchor(const std::vector<Vec3>& positions) {
   refitBounds(*hierarchy_, anchor_positions_.data(), anchor_nodes_, true);
   nodes_ = anchor_nodes_;
   std::fill(delta_.begin(), delta_.end(), 0.0);
-  ++geometry_.version;
+  geometry_.version = nextGeometryVersion();
 }
 
 void DeformingBody::inflate(double delta) { inflate(std::vector<double>(positions_.size(), delta)); }
@@ -110,7 +110,7 @@ void DeformingBody::inflate(const std::vector<double>& delta) {
       break;
     }
   }
-  ++geometry_.version;
+  geometry_.version = nextGeometryVersion();
 }
 
 DisplacementCheck DeformingBody::setPositions(const std::vector<Vec3>& positions) {
@@ -128,7 +128,7 @@ DisplacementCheck DeformingBody::setPositions(const std::vector<Vec3>& positions
   }
   if (!check.accepted) return check;
   positions_ = positions;
-  ++geometry_.version;
+  geometry_.version = nextGeometryVersion();
   return check;
 }
 

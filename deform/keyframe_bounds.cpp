@@ -81,7 +81,7 @@ KeyframeBody::KeyframeBody(std::shared_ptr<const Hierarchy> hierarchy,
   geometry_.positions = positions_.data();
   geometry_.center = h.center();
   geometry_.box_scale = h.boxScale();
-  geometry_.version = 1;
+  geometry_.version = nextGeometryVersion();
   setTime(0);
 }
 
@@ -123,7 +123,7 @@ void KeyframeBody::interpolateBounds(double t) {
       out.eps[k] = std::nextafter(static_cast<float>(std::min(from_a, from_b)), inf);
     }
   }
-  ++geometry_.version;
+  geometry_.version = nextGeometryVersion();
 }
 
 void KeyframeBody::setTime(double t) {

@@ -228,7 +228,7 @@ struct Checker {
         f.check(same(faceDistance(got[i].triangle, p), got[i].distance),
                 [&] { return "rank " + std::to_string(i) + ": triangle's own distance differs"; });
     }
-    // Sorted up to rounding (see the [!mayfail] case below for the exact order).
+    // Sorted by exact distance (see the exact-order case below).
     for (size_t i = 0; i + 1 < got.size(); ++i)
       f.check(got[i].distance <= got[i + 1].distance || same(got[i].distance, got[i + 1].distance), [&] {
         return "k closest not sorted at " + std::to_string(i) + ": " + num(got[i].distance) + " (triangle " +
@@ -439,7 +439,7 @@ TEST_CASE("coherent queries: reset() forgets the coherent state", "[coherent]") 
       s.coherent.reset();
       s.exact.reset();
       s.k.reset();
-      // Whatever reset() does to the counters (see the [!mayfail] case below), the next
+      // reset() zeroes the counters (see the case below); the next
       // queries count from there.
       const CoherenceCounters before_set = s.coherent.coherence();
       const CoherenceCounters before_front = s.exact.coherence();
@@ -465,7 +465,7 @@ TEST_CASE("coherent queries: reset() forgets the coherent state", "[coherent]") 
 // The header says the coherence counters count "since the stream was created or reset";
 // QueryStream::reset() (core/sweep_query.cpp) leaves them untouched. Kept as a known failure
 // until the contract and the code agree.
-TEST_CASE("coherent queries: reset() zeroes the coherence counters", "[coherent][!mayfail]") {
+TEST_CASE("coherent queries: reset() zeroes the coherence counters", "[coherent]") {
   const Mesh mesh = scenes::icosphere(3);
   const auto h = Hierarchy::build(mesh);
   QueryStream s(h);
@@ -567,7 +567,7 @@ TEST_CASE("coherent queries: extreme CoherenceOptions stay exact", "[coherent]")
 // front by bound + drift (core/sweep_query.cpp), so two faces whose distances differ by less
 // than the rounding of that sum (faces sharing the closest vertex, ~1 ulp apart) come out in
 // triangle-index order instead of distance order. Known failure until the output is sorted.
-TEST_CASE("coherent queries: kClosestCoherent's exact order", "[coherent][!mayfail]") {
+TEST_CASE("coherent queries: kClosestCoherent's exact order", "[coherent]") {
   const Mesh* mesh = realMesh("holes");
   REQUIRE(mesh);
   const auto h = Hierarchy::build(*mesh);

@@ -727,3 +727,48 @@ TEST_CASE("inflated bounds: bad input throws and changes nothing", "[deform][inf
   const Mesh now = withPositions(mesh, moved);
   checkFreshQueries(now, stream, queryPoints(now, 40, 10, 4, 5), checks);
 }
+
+// Geometry versions are unique in the process: a caller-held CoherentState that moves from one
+// body's geometry to another's (same hierarchy) must not reuse its certified set there.
+TEST_CASE("deform: a coherent state moved to another body is not certified there", "[deform]") {
+  const Mesh m = scenes::torus(1.0, 0.3, 64, 32);
+  const auto h = Hierarchy::build(m);
+  KeyframeBody keyframed(h, {m.positions});
+  DeformingBody deforming(h);
+  // Bring the triangle farthest from the query point right next to it.
+  const Vec3 p(1.0, 0.0, 0.45);
+  TriangleIndex far_face = 0;
+  double far_distance = 0;
+  for (TriangleIndex t = 0; t < m.triangles.size(); ++t) {
+    const double d = (m.positions[m.triangles[t][0]] - p).norm();
+    if (d > far_distance) { far_distance = d; far_face = t; }
+  }
+  std::vector<Vec3> moved = m.positions;
+  for (int k = 0; k < 3; ++k)
+    moved[m.triangles[far_face][k]] = Vec3(1.0, 0.0, 0.40) + 0.01 * Vec3(k == 1, k == 2, 0);
+  deforming.anchor(moved);
+  CHECK(keyframed.geometry().version != deforming.geometry().version);
+
+  QueryStream a(h), b(h);
+  a.setGeometry(&keyframed.geometry());
+  b.setGeometry(&deforming.geometry());
+  CoherentState state;
+  for (int i = 0; i < 5; ++i) a.closestCoherent(p + Vec3(0.001 * i, 0, 0), state);
+  bool certified = true;
+  const Vec3 q = p + Vec3(0.005, 0, 0);
+  const ClosestPoint r = b.closestCoherent(q, state, &certified);
+  Mesh moved_mesh = m;
+  moved_mesh.positions = moved;
+  CHECK_FALSE(certified);
+  CHECK(r.distance == Approx(bruteForceClosest(moved_mesh, q).distance).epsilon(1e-12));
+}
+
+// A point that does not move still gets a certificate after its first query.
+TEST_CASE("deform: a stationary coherent point is certified", "[deform]") {
+  const Mesh m = scenes::torus(1.0, 0.3, 32, 16);
+  QueryStream stream(Hierarchy::build(m));
+  const Vec3 p(1.2, 0.1, 0.5);
+  stream.closestCoherent(p);
+  for (int i = 0; i < 10; ++i) stream.closestCoherent(p);
+  CHECK(stream.coherence().certified == 10);
+}
