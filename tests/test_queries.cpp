@@ -38,11 +38,18 @@ using namespace meshsweeper;
 using scenes::Random;
 
 // Counts allocations of the whole binary, so a test can assert that warm queries allocate
-// nothing (the stream is documented to be allocation-free once warm).
+// nothing (the stream is documented to be allocation-free once warm). Sanitizer builds keep
+// their own allocator (replacing operator new there mixes the two): no counting there.
+#if defined(__SANITIZE_ADDRESS__) || defined(__SANITIZE_THREAD__)
+#define MESHSWEEPER_COUNT_ALLOCATIONS 0
+#else
+#define MESHSWEEPER_COUNT_ALLOCATIONS 1
+#endif
 namespace {
 std::atomic<size_t> g_allocations{0};
 }  // namespace
 
+#if MESHSWEEPER_COUNT_ALLOCATIONS
 // (GCC cannot see that these free() calls match the malloc() of the operator new above.)
 #pragma GCC diagnostic push
 #pragma GCC diagnostic ignored "-Wmismatched-new-delete"
@@ -54,6 +61,7 @@ void* operator new(std::size_t size) {
 void operator delete(void* p) noexcept { std::free(p); }
 void operator delete(void* p, std::size_t) noexcept { std::free(p); }
 #pragma GCC diagnostic pop
+#endif
 
 namespace {
 
@@ -675,7 +683,10 @@ TEST_CASE("queries: the centre of a finely tessellated sphere", "[queries][worst
   }
   const size_t allocations = g_allocations.load() - before;
   CHECK(differ == 0);
-  CHECK(allocations == 0);
+  if (MESHSWEEPER_COUNT_ALLOCATIONS)
+    CHECK(allocations == 0);
+  else
+    WARN("allocation counting is off in sanitizer builds");
 }
 
 TEST_CASE("queries: a stream moved between meshes' points answers like a fresh one", "[queries][warm]") {
