@@ -789,20 +789,27 @@ void QueryStream::frontRefine(const Vec3& p, const float q[3], bool far, double&
   lower_ = lower;
 }
 
-ClosestPoint QueryStream::closestWithinCoherent(const Vec3& p, double tolerance) {
-  const Hierarchy& h = *hierarchy_;
-  const TreeGeometry& g = geometry();
-  counters_ = {};
-  ++coherence_.steps;
-  const ScaledPoint sp = scalePoint(g, p);
+// Moves the front to p: every bound drops by the distance moved (the drift offset), or the
+// front restarts from the root (the reset policy: new geometry, a front over budget, or a jump
+// longer than jump_factor times the last distance).
+void QueryStream::frontMove(const Vec3& p) {
   const double moved = (p - front_point_).norm();
-  if (!has_front_ || front_version_ != g.version || front_.size() > options_.front_budget ||
+  if (!has_front_ || front_version_ != geometry().version || front_.size() > options_.front_budget ||
       moved > options_.jump_factor * front_distance_) {
     frontStart(p);
   } else {
     drift_ += moved;
     front_point_ = p;
   }
+}
+
+ClosestPoint QueryStream::closestWithinCoherent(const Vec3& p, double tolerance) {
+  const Hierarchy& h = *hierarchy_;
+  const TreeGeometry& g = geometry();
+  counters_ = {};
+  ++coherence_.steps;
+  const ScaledPoint sp = scalePoint(g, p);
+  frontMove(p);
   double upper = kInf;
   TriangleIndex upper_face = kInvalidIndex;
   VertexIndex upper_vertex = kInvalidIndex;
@@ -822,14 +829,7 @@ void QueryStream::kClosestCoherent(const Vec3& p, size_t k, std::vector<Triangle
   ++coherence_.steps;
   if (k == 0) return;
   const ScaledPoint sp = scalePoint(g, p);
-  const double moved = (p - front_point_).norm();
-  if (!has_front_ || front_version_ != g.version || front_.size() > options_.front_budget ||
-      moved > options_.jump_factor * front_distance_) {
-    frontStart(p);
-  } else {
-    drift_ += moved;
-    front_point_ = p;
-  }
+  frontMove(p);
   double upper = kInf;
   TriangleIndex upper_face = kInvalidIndex;
   VertexIndex upper_vertex = kInvalidIndex;

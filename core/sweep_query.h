@@ -174,6 +174,7 @@ class QueryStream {
   double depthFirst(const Vec3& p, double start2, double reach, TriangleIndex& best_face);
   double entryBound(const DriftEntry& e, const Vec3& p, const float q[3], bool far) const;
   void frontStart(const Vec3& p);
+  void frontMove(const Vec3& p);
   void frontPush(const DriftEntry& e);
   DriftEntry frontPop();
   void frontRefine(const Vec3& p, const float q[3], bool far, double& upper, TriangleIndex& upper_face,
