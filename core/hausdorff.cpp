@@ -60,6 +60,7 @@
 // Each bound gets a margin of 1e-12 times the largest coordinate magnitude of A and B, which
 // covers the rounding of the distances themselves.
 #include "core/hausdorff.h"
+#include "core/morton.h"
 
 #include "core/sweep_query.h"
 
@@ -418,17 +419,6 @@ void forChunks(size_t n, size_t chunk, bool parallel, const Body& body) {
       tbb::simple_partitioner());
 }
 
-// Spreads the low 21 bits of x so that two zero bits separate each bit (Morton codes).
-uint64_t spreadBits(uint64_t x) {
-  x &= 0x1fffff;
-  x = (x | x << 32) & 0x1f00000000ffffull;
-  x = (x | x << 16) & 0x1f0000ff0000ffull;
-  x = (x | x << 8) & 0x100f00f00f00f00full;
-  x = (x | x << 4) & 0x10c30c30c30c30c3ull;
-  x = (x | x << 2) & 0x1249249249249249ull;
-  return x;
-}
-
 double largestCoordinate(const Mesh& mesh) {
   double m = 0;
   for (const Triangle& t : mesh.triangles)
@@ -686,14 +676,7 @@ class Direction {
   std::vector<std::pair<uint64_t, uint32_t>> order_;
   Vec3 box_lower_ = Vec3::Zero(), box_extent_ = Vec3::Ones();  // A's bounds, for Morton codes
 
-  uint64_t mortonCode(const Vec3& x) const {
-    uint64_t code = 0;
-    for (int axis = 0; axis < 3; ++axis) {
-      const double t = (x[axis] - box_lower_[axis]) / box_extent_[axis];
-      code |= spreadBits(static_cast<uint64_t>(std::clamp(t, 0.0, 1.0) * 2097151.0)) << axis;
-    }
-    return code;
-  }
+  uint64_t mortonCode(const Vec3& x) const { return meshsweeper::mortonCode(x, box_lower_, box_extent_); }
 
   // Higher bound first; among equal bounds the lower cell id (deterministic).
   static bool heapBefore(const HeapEntry& x, const HeapEntry& y) {

@@ -19,6 +19,7 @@
 //   bounds: per slot, the float box of its subtree's vertices (rounded outward) and
 //     eps = max over its subtree's vertices of their distance to the slot's triangle.
 #include "core/hierarchy.h"
+#include "core/morton.h"
 
 #include <algorithm>
 #include <chrono>
@@ -50,17 +51,6 @@ struct Box {
   }
   Vec3 center() const { return 0.5 * (lower + upper); }
 };
-
-// Spreads the low 21 bits of x so that two zero bits separate each bit (Morton codes).
-uint64_t spreadBits(uint64_t x) {
-  x &= 0x1fffff;
-  x = (x | x << 32) & 0x1f00000000ffffull;
-  x = (x | x << 16) & 0x1f0000ff0000ffull;
-  x = (x | x << 8) & 0x100f00f00f00f00full;
-  x = (x | x << 4) & 0x10c30c30c30c30c3ull;
-  x = (x | x << 2) & 0x1249249249249249ull;
-  return x;
-}
 
 // The cover tree produced by contraction: raw nodes [0, faces) are the original faces, later ones
 // are triangles created by contractions (or synthetic nodes over the roots).
@@ -244,11 +234,7 @@ void Contractor::run(CoverTree& tree, std::vector<VertexIndex>& contracted_into,
     const Vec3 extent = (bounds.upper - bounds.lower).cwiseMax(1e-300);
     std::vector<uint64_t> code(n, 0);
     for (VertexIndex v : active) {
-      const Vec3 q = ((mesh_.positions[v] - bounds.lower).cwiseQuotient(extent) * 2097151.0)
-                         .cwiseMax(0.0).cwiseMin(2097151.0);
-      code[v] = spreadBits(static_cast<uint64_t>(q.x())) |
-                spreadBits(static_cast<uint64_t>(q.y())) << 1 |
-                spreadBits(static_cast<uint64_t>(q.z())) << 2;
+      code[v] = mortonCode(mesh_.positions[v], bounds.lower, extent);
     }
     std::sort(active.begin(), active.end(), [&](VertexIndex a, VertexIndex b) {
       return code[a] != code[b] ? code[a] < code[b] : a < b;

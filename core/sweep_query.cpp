@@ -223,16 +223,20 @@ void QueryStream::reset() {
   front_.clear();
 }
 
-void QueryStream::leafDistances(int32_t leaf, const Vec3& p, double out[8]) {
+// Exact squared distances from p to a leaf block's faces (out[lane]); counts the test and
+// returns the used lanes.
+uint32_t QueryStream::testLeaf(int32_t leaf, const Vec3& p, double out[8]) {
   const TreeGeometry& g = geometry();
+  const uint32_t used = hierarchy_->leafLanes(leaf);
+  ++counters_.leaves_tested;
+  counters_.triangles_tested += used;
   if (g.leaf_blocks) {
     squaredDistancesToBlock(p, g.leaf_blocks[leaf], out);
-    return;
+    return used;
   }
   // Moving geometry without inline faces: gather the lanes' corners from the positions.
   const Hierarchy& h = *hierarchy_;
   const TriangleIndex* lanes = &h.leafTriangles()[8 * static_cast<size_t>(leaf)];
-  const uint32_t used = h.leafLanes(leaf);
   for (uint32_t lane = 0; lane < 8; ++lane) {
     const Triangle& t = h.mesh().triangles[lanes[lane < used ? lane : 0]];
     for (int k = 0; k < 3; ++k) {
@@ -241,6 +245,7 @@ void QueryStream::leafDistances(int32_t leaf, const Vec3& p, double out[8]) {
     }
   }
   squaredDistancesToBlock(p, gather_, out);
+  return used;
 }
 
 TriangleHit QueryStream::hitOn(TriangleIndex face, const Vec3& p) const {
@@ -284,10 +289,7 @@ double QueryStream::depthFirst(const Vec3& p, double start2, double reach, Trian
     if (entry.bound > threshold) continue;
     if (isLeafRef(entry.ref)) {
       const int32_t leaf = leafIndex(entry.ref);
-      leafDistances(leaf, p, exact);
-      const uint32_t used = h.leafLanes(leaf);
-      ++counters_.leaves_tested;
-      counters_.triangles_tested += used;
+      const uint32_t used = testLeaf(leaf, p, exact);
       for (uint32_t lane = 0; lane < used; ++lane) {
         if (exact[lane] < best2) {
           best2 = exact[lane];
@@ -536,10 +538,7 @@ ClosestPoint QueryStream::closestWithin(const Vec3& p, double tolerance) {
     heap_.pop_back();
     if (isLeafRef(entry.ref)) {
       const int32_t leaf = leafIndex(entry.ref);
-      leafDistances(leaf, p, exact);
-      const uint32_t used = h.leafLanes(leaf);
-      ++counters_.leaves_tested;
-      counters_.triangles_tested += used;
+      const uint32_t used = testLeaf(leaf, p, exact);
       for (uint32_t lane = 0; lane < used; ++lane) {
         const double d = std::sqrt(exact[lane]);
         if (d < upper) { upper = d; upper_face = lanes[8 * leaf + lane]; upper_vertex = kInvalidIndex; }
@@ -645,10 +644,7 @@ void QueryStream::within(const Vec3& p, double d, std::vector<TriangleHit>& out)
     stack_.pop_back();
     if (isLeafRef(entry.ref)) {
       const int32_t leaf = leafIndex(entry.ref);
-      leafDistances(leaf, p, exact);
-      const uint32_t used = h.leafLanes(leaf);
-      ++counters_.leaves_tested;
-      counters_.triangles_tested += used;
+      const uint32_t used = testLeaf(leaf, p, exact);
       for (uint32_t lane = 0; lane < used; ++lane) {
         if (!(exact[lane] <= d * d * (1 + 1e-9))) continue;
         const TriangleHit hit = hitOn(lanes[8 * leaf + lane], p);

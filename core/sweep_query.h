@@ -169,7 +169,7 @@ class QueryStream {
   };
 
   const TreeGeometry& geometry() const { return geometry_ ? *geometry_ : rest_; }
-  void leafDistances(int32_t leaf, const Vec3& p, double out[8]);
+  uint32_t testLeaf(int32_t leaf, const Vec3& p, double out[8]);
   TriangleHit hitOn(TriangleIndex face, const Vec3& p) const;
   double depthFirst(const Vec3& p, double start2, double reach, TriangleIndex& best_face);
   double entryBound(const DriftEntry& e, const Vec3& p, const float q[3], bool far) const;
