@@ -122,6 +122,32 @@ void refitBounds(const Hierarchy& h, const Vec3* positions, std::vector<Node8>& 
   });
 }
 
+void slotDisplacements(const Hierarchy& h, const std::vector<double>& w, std::vector<double>& subtree,
+                       std::vector<double>& corners) {
+  const auto& nodes = h.nodes();
+  const auto& lanes = h.leafTriangles();
+  const Mesh& mesh = h.mesh();
+  subtree.assign(8 * nodes.size(), 0.0);
+  corners.assign(8 * nodes.size(), 0.0);
+  for (size_t node = nodes.size(); node-- > 0;) {  // children have larger indices
+    for (int k = 0; k < 8; ++k) {
+      const ChildRef c = nodes[node].child[k];
+      if (c == kEmptyChild) continue;
+      double worst = 0;
+      if (isLeafRef(c)) {
+        for (uint32_t lane = 0; lane < h.leafLanes(leafIndex(c)); ++lane)
+          for (VertexIndex v : mesh.triangles[lanes[8 * leafIndex(c) + lane]]) worst = std::max(worst, w[v]);
+      } else {
+        for (int j = 0; j < 8; ++j) worst = std::max(worst, subtree[8 * c + j]);
+      }
+      subtree[8 * node + k] = worst;
+      double corner = 0;
+      for (int i = 0; i < 3; ++i) corner = std::max(corner, w[nodes[node].corner[i][k]]);
+      corners[8 * node + k] = corner;
+    }
+  }
+}
+
 TreeGeometry Hierarchy::restGeometry() const {
   TreeGeometry g;
   g.nodes = nodes_.data();

@@ -58,31 +58,20 @@ void DeformingBody::inflate(const std::vector<double>& delta) {
       throw std::invalid_argument("DeformingBody: displacement bound " + std::to_string(v) +
                                   " must be finite and >= 0");
   const Hierarchy& h = *hierarchy_;
-  const Mesh& mesh = h.mesh();
-  const auto& lanes = h.leafTriangles();
   const float inf = std::numeric_limits<float>::infinity();
   const double scale = h.boxScale();
-  // The largest displacement bound below each slot, children first (larger node indices).
-  std::vector<double> subtree(8 * anchor_nodes_.size(), 0.0);
+  // How far each slot's subtree and corners may move (one bottom-up pass).
+  std::vector<double> subtree, corners;
+  slotDisplacements(h, delta, subtree, corners);
   double extent = 0;
-  for (size_t node = anchor_nodes_.size(); node-- > 0;) {
+  for (size_t node = 0; node < anchor_nodes_.size(); ++node) {
     const Node8& a = anchor_nodes_[node];
     Node8& out = nodes_[node];
     out = a;
     for (int k = 0; k < 8; ++k) {
-      const ChildRef c = a.child[k];
-      if (c == kEmptyChild) continue;
-      double worst = 0;
-      if (isLeafRef(c)) {
-        for (uint32_t lane = 0; lane < h.leafLanes(leafIndex(c)); ++lane)
-          for (VertexIndex v : mesh.triangles[lanes[8 * leafIndex(c) + lane]]) worst = std::max(worst, delta[v]);
-      } else {
-        for (int j = 0; j < 8; ++j) worst = std::max(worst, subtree[8 * c + j]);
-      }
-      subtree[8 * node + k] = worst;
-      double corners = 0;
-      for (int i = 0; i < 3; ++i) corners = std::max(corners, delta[a.corner[i][k]]);
-      out.eps[k] = std::nextafter(static_cast<float>((a.eps[k] + worst + corners) * (1 + 1e-9)), inf);
+      if (a.child[k] == kEmptyChild) continue;
+      const double worst = subtree[8 * node + k];
+      out.eps[k] = std::nextafter(static_cast<float>((a.eps[k] + worst + corners[8 * node + k]) * (1 + 1e-9)), inf);
       const float grow = std::nextafter(static_cast<float>(worst * scale), inf);
       for (int axis = 0; axis < 3; ++axis) {
         out.lower[axis][k] = a.lower[axis][k] - grow;

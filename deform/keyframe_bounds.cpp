@@ -48,31 +48,15 @@ KeyframeBody::KeyframeBody(std::shared_ptr<const Hierarchy> hierarchy,
 
   // Delta per slot and frame pair: corner displacement + subtree displacement (bottom-up).
   const auto& nodes = h.nodes();
-  const auto& lanes = h.leafTriangles();
-  const Mesh& mesh = h.mesh();
   for (size_t f = 0; f + 1 < frames_.size(); ++f) {
     std::vector<double> moved(n);
     for (size_t v = 0; v < n; ++v) moved[v] = (frames_[f + 1][v] - frames_[f][v]).norm();
-    std::vector<double> subtree(8 * nodes.size(), 0.0);
+    std::vector<double> subtree, corners;
+    slotDisplacements(h, moved, subtree, corners);
     std::vector<float>& delta = delta_.emplace_back(8 * nodes.size(), 0.0f);
-    for (size_t node = nodes.size(); node-- > 0;) {
-      for (int k = 0; k < 8; ++k) {
-        const ChildRef c = nodes[node].child[k];
-        if (c == kEmptyChild) continue;
-        double worst = 0;
-        if (isLeafRef(c)) {
-          for (uint32_t lane = 0; lane < h.leafLanes(leafIndex(c)); ++lane)
-            for (VertexIndex v : mesh.triangles[lanes[8 * leafIndex(c) + lane]]) worst = std::max(worst, moved[v]);
-        } else {
-          for (int j = 0; j < 8; ++j) worst = std::max(worst, subtree[8 * c + j]);
-        }
-        subtree[8 * node + k] = worst;
-        double corners = 0;
-        for (int i = 0; i < 3; ++i) corners = std::max(corners, moved[nodes[node].corner[i][k]]);
-        delta[8 * node + k] = std::nextafter(static_cast<float>((worst + corners) * (1 + 1e-9)),
-                                             std::numeric_limits<float>::infinity());
-      }
-    }
+    for (size_t i = 0; i < delta.size(); ++i)
+      delta[i] = std::nextafter(static_cast<float>((subtree[i] + corners[i]) * (1 + 1e-9)),
+                                std::numeric_limits<float>::infinity());
   }
   nodes_ = h.nodes();
   positions_ = frames_[0];
