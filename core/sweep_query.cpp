@@ -331,6 +331,30 @@ double QueryStream::depthFirst(const Vec3& p, double start2, double reach, Trian
   return best2;
 }
 
+// The rebuild of a set certificate: a depth-first search from start2 (best_face its face) that
+// leaves in gathered_ the faces within best + reach of p, at most `capacity` of them (the
+// nearest), in no particular order. Returns the set's reach: every face not kept is at least
+// that far from p.
+double QueryStream::gatherCandidates(const Vec3& p, double start2, double reach, uint32_t capacity,
+                                     TriangleIndex& best_face) {
+  gathered_.clear();
+  const double best2 = depthFirst(p, start2, reach, best_face);
+  const double limit = std::sqrt(best2) + reach;
+  size_t kept = 0;
+  for (const auto& entry : gathered_)
+    if (std::sqrt(entry.first) <= limit) gathered_[kept++] = entry;
+  gathered_.resize(kept);
+  // Everything never gathered is strictly farther than `limit`. If too many were gathered,
+  // keep the nearest (a partial selection, not a sort): the reach drops to the first left out.
+  if (gathered_.size() > capacity) {
+    std::nth_element(gathered_.begin(), gathered_.begin() + capacity, gathered_.end());
+    const double first_out = std::sqrt(gathered_[capacity].first);
+    gathered_.resize(capacity);
+    return first_out;
+  }
+  return std::nextafter(limit, kInf);
+}
+
 ClosestPoint QueryStream::closest(const Vec3& p) {
   counters_ = {};
   TriangleIndex face = kInvalidIndex;
@@ -365,7 +389,8 @@ ClosestPoint QueryStream::closestCoherent(const Vec3& p) {
         squaredDistancesToBlock(p, set_blocks_[b], exact);
         const size_t lanes = std::min<size_t>(8, count - 8 * b);
         for (size_t lane = 0; lane < lanes; ++lane) {
-          if (exact[lane] < best2) { best2 = exact[lane]; face = set_faces_[8 * b + lane]; }
+          const TriangleIndex f = set_faces_[8 * b + lane];
+          if (exact[lane] < best2 || (exact[lane] == best2 && f < face)) { best2 = exact[lane]; face = f; }
         }
       }
       counters_.triangles_tested = static_cast<uint32_t>(count);
@@ -386,22 +411,7 @@ ClosestPoint QueryStream::closestCoherent(const Vec3& p) {
       start2 = squaredDistanceToTriangle(p, g.positions[t[0]], g.positions[t[1]], g.positions[t[2]]);
       face = last_face_;
     }
-    gathered_.clear();
-    const double best2 = depthFirst(p, start2, reach, face);
-    const double limit = std::sqrt(best2) + reach;
-    size_t kept = 0;
-    for (const auto& entry : gathered_)
-      if (std::sqrt(entry.first) <= limit) gathered_[kept++] = entry;
-    gathered_.resize(kept);
-    std::sort(gathered_.begin(), gathered_.end());
-    double set_reach = limit;
-    // Strictly farther than `limit` lies everything not gathered; keep the nearest if too many.
-    if (gathered_.size() > options_.max_candidates) {
-      set_reach = std::sqrt(gathered_[options_.max_candidates].first);
-      gathered_.resize(options_.max_candidates);
-    } else {
-      set_reach = std::nextafter(limit, kInf);
-    }
+    const double set_reach = gatherCandidates(p, start2, reach, options_.max_candidates, face);
     set_faces_.clear();
     set_blocks_.resize((gathered_.size() + 7) / 8);
     for (size_t i = 0; i < set_blocks_.size() * 8; ++i) {
@@ -478,19 +488,7 @@ ClosestPoint QueryStream::closestCoherent(const Vec3& p, CoherentState& state, b
       start2 = squaredDistanceToTriangle(p, g.positions[t[0]], g.positions[t[1]], g.positions[t[2]]);
       face = state.last_face;
     }
-    gathered_.clear();
-    const double best2 = depthFirst(p, start2, reach, face);
-    const double limit = std::sqrt(best2) + reach;
-    size_t kept = 0;
-    for (const auto& entry : gathered_)
-      if (std::sqrt(entry.first) <= limit) gathered_[kept++] = entry;
-    gathered_.resize(kept);
-    std::sort(gathered_.begin(), gathered_.end());
-    double set_reach = std::nextafter(limit, kInf);
-    if (gathered_.size() > kCoherentSetSize) {
-      set_reach = std::sqrt(gathered_[kCoherentSetSize].first);
-      gathered_.resize(kCoherentSetSize);
-    }
+    const double set_reach = gatherCandidates(p, start2, reach, kCoherentSetSize, face);
     state.count = static_cast<uint32_t>(gathered_.size());
     for (uint32_t i = 0; i < state.count; ++i) state.faces[i] = gathered_[i].second;
     state.anchor = p;
