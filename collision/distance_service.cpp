@@ -63,41 +63,8 @@ const char* kindName(BodyKind kind) {
 struct PairState {
   uint32_t slot = 0;
   uint32_t generation = 0;
-  double last_distance = 0;  // exact distance at state.last_point (when state.last_face is set)
   CoherentState state = CoherentState();  // value-initialised: a cold start, faces zeroed
 };
-
-// False only if no triangle of the geometry can be within distance d of q (body frame): every
-// leaf slot's box is farther than d. Depth-first over the slot boxes, stopping at the first leaf
-// slot within d. The float boxes hold (x - center) * box_scale rounded outward, so the distance
-// from the double-scaled point to a box, computed in double with a relative slack, bounds the
-// distance to every face below it from below (query-point rounding plays no part).
-bool treeMayReach(const TreeGeometry& g, const Vec3& q, double d) {
-  const Vec3 s = (q - g.center) * g.box_scale;
-  const double ds = d * g.box_scale;
-  const double limit = std::min(ds * ds * (1 + 1e-12), std::numeric_limits<double>::max());
-  constexpr int kStack = 128;
-  int32_t stack[kStack];
-  int top = 0;
-  stack[top++] = 0;
-  while (top > 0) {
-    const Node8& n = g.nodes[stack[--top]];
-    for (int k = 0; k < 8; ++k) {
-      const ChildRef child = n.child[k];
-      if (child == kEmptyChild) continue;
-      double d2 = 0;
-      for (int axis = 0; axis < 3; ++axis) {
-        const double gap = std::max(std::max(static_cast<double>(n.lower[axis][k]) - s[axis],
-                                             s[axis] - static_cast<double>(n.upper[axis][k])), 0.0);
-        d2 += gap * gap;
-      }
-      if (!(d2 <= limit)) continue;
-      if (isLeafRef(child) || top == kStack) return true;
-      stack[top++] = child;
-    }
-  }
-  return false;
-}
 
 // The pair states of one block of points: [local point + 1] CSR into pairs, by increasing slot.
 struct BlockStates {
@@ -375,9 +342,7 @@ struct DistanceService::Impl {
             PairState fresh;
             fresh.slot = slot;
             fresh.generation = bodies[slot].generation;
-            // A moving body's geometry changes every step, which drops the cached set anyway:
-            // gather no spare candidates for it (the previous face still warm-starts).
-            fresh.state.reach_steps = bodies[slot].kind == BodyKind::kRigid ? options.reach_steps : 0.0f;
+            fresh.state.reach_steps = options.reach_steps;
             s.pairs.push_back(fresh);
           }
         }
@@ -403,35 +368,14 @@ struct DistanceService::Impl {
       Vec3 best_q = Vec3::Zero();
       for (uint32_t k = states.begin[j]; k < states.begin[j + 1]; ++k) {
         PairState& pair = states.pairs[k];
-        const Body& body = bodies[pair.slot];
         const Vec3 q = toBody(pair.slot, p);
-        // Pairs that cannot reach d are culled without a query (their state is kept as it is):
-        // a rigid body's distance is 1-Lipschitz in q; any face bounds the distance from above;
-        // else the tree's boxes decide.
-        bool query = true;
-        if (pair.state.last_face != kInvalidIndex) {
-          ++stats.warm_pairs;
-          const double moved = (q - pair.state.last_point).norm();
-          const bool rigid = body.kind == BodyKind::kRigid;
-          if (rigid && (pair.last_distance - moved) * (1 - 1e-12) > d) {
-            query = false;
-          } else if (!(rigid && (pair.last_distance + moved) * (1 + 1e-12) <= d)) {
-            const Vec3* x = body.positions();
-            const Triangle& t = body.shape->mesh().triangles[pair.state.last_face];
-            if (!(std::sqrt(squaredDistanceToTriangle(q, x[t[0]], x[t[1]], x[t[2]])) <= d))
-              query = treeMayReach(body.treeGeometry(), q, d);
-          }
-        } else {
-          query = treeMayReach(body.treeGeometry(), q, d);
-        }
-        if (!query) {
-          ++stats.culled_pairs;
-          continue;
-        }
+        // The closest face within d: a pair out of reach is answered (or certified) without
+        // looking farther than d, and its state's certificate covers the next steps.
+        if (pair.state.lineage != 0) ++stats.warm_pairs;
         bool certified = false;
-        const ClosestPoint c = stream(s, pair.slot).closestCoherent(q, pair.state, &certified);
-        pair.last_distance = c.distance;
+        const ClosestPoint c = stream(s, pair.slot).closestCoherent(q, pair.state, &certified, d);
         stats.certified_pairs += certified;
+        stats.out_of_reach_pairs += c.triangle == kInvalidIndex;
         stats.triangles_tested += c.counters.triangles_tested;
         if (c.distance <= d && c.distance < best) {
           best = c.distance;
@@ -730,7 +674,7 @@ void DistanceService::step(PointsRef points, double max_distance, QueryMode mode
     stats.pairs += s.pairs;
     stats.warm_pairs += s.warm_pairs;
     stats.certified_pairs += s.certified_pairs;
-    stats.culled_pairs += s.culled_pairs;
+    stats.out_of_reach_pairs += s.out_of_reach_pairs;
     stats.triangles_tested += s.triangles_tested;
     stats.hits += s.hits;
     stats.states += s.states;

@@ -99,7 +99,8 @@ struct StepStats {
   uint64_t pairs = 0;             // (point, body) pairs the broadphase passed to a body
   uint64_t warm_pairs = 0;        // closest mode: pairs that had a state from the last step
   uint64_t certified_pairs = 0;   // closest mode: pairs answered from the cached candidate set
-  uint64_t culled_pairs = 0;      // closest mode: pairs proven farther than the distance, not queried
+  uint64_t out_of_reach_pairs = 0;  // closest mode: pairs with nothing within the distance (found
+                                    // or certified without looking farther)
   uint64_t triangles_tested = 0;  // exact point-triangle distances
   uint64_t hits = 0;              // hits returned
   uint64_t states = 0;            // coherent states kept after the step

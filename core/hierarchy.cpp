@@ -79,19 +79,24 @@ void refitBounds(const Hierarchy& h, const Vec3* positions, std::vector<Node8>& 
     }
   }
   if (!radii) return;
-  // Each vertex is shared by about six faces: evaluate each subtree vertex once per slot
-  // (a per-task stamp array marks the vertices already seen).
+  // eps of a slot = the largest distance from its subtree's vertices to its triangle T, found
+  // by branch and bound over the subtree's slots, farthest bound first: a slot whose box lies
+  // within `worst` of T cannot raise the maximum and is skipped, so the result is the same
+  // maximum as over every vertex. Each vertex is shared by about six faces: within one slot it
+  // is evaluated once (a per-task stamp array marks the vertices already seen).
   const size_t vertex_count = mesh.positions.size();
-  struct Stamps {
+  struct Scratch {
     std::vector<uint32_t> seen;  // [vertex] the clock value of the last slot that saw it
     uint32_t clock = 0;
+    std::vector<std::pair<double, ChildRef>> pending;  // (bound, child) still to visit
   };
-  tbb::enumerable_thread_specific<Stamps> per_thread;
+  tbb::enumerable_thread_specific<Scratch> per_thread;
   tbb::parallel_for(tbb::blocked_range<size_t>(0, nodes.size(), 16), [&](const tbb::blocked_range<size_t>& range) {
-    Stamps& stamps = per_thread.local();
-    if (stamps.seen.size() != vertex_count) stamps.seen.assign(vertex_count, 0);
-    std::vector<uint32_t>& stamp = stamps.seen;
-    uint32_t& clock = stamps.clock;
+    Scratch& scratch = per_thread.local();
+    if (scratch.seen.size() != vertex_count) scratch.seen.assign(vertex_count, 0);
+    std::vector<uint32_t>& stamp = scratch.seen;
+    uint32_t& clock = scratch.clock;
+    auto& pending = scratch.pending;
     for (size_t node = range.begin(); node < range.end(); ++node) {
       Node8& n = nodes[node];
       for (int k = 0; k < 8; ++k) {
@@ -100,18 +105,50 @@ void refitBounds(const Hierarchy& h, const Vec3* positions, std::vector<Node8>& 
         const Vec3& a = positions[n.corner[0][k]];
         const Vec3& b = positions[n.corner[1][k]];
         const Vec3& c = positions[n.corner[2][k]];
-        uint32_t first, last;
-        if (isLeafRef(child)) { first = leafIndex(child); last = first + 1; }
-        else { first = h.leafBegin(child); last = h.leafEnd(child); }
         ++clock;
-        double worst = 0;
-        for (uint32_t leaf = first; leaf < last; ++leaf) {
+        double worst = 0;  // squared
+        auto evaluateLeaf = [&](int32_t leaf) {
           for (uint32_t lane = 0; lane < h.leafLanes(leaf); ++lane) {
             for (VertexIndex v : mesh.triangles[lanes[8 * leaf + lane]]) {
               if (stamp[v] == clock) continue;
               stamp[v] = clock;
               worst = std::max(worst, squaredDistanceToTriangle(positions[v], a, b, c));
             }
+          }
+        };
+        if (isLeafRef(child)) {
+          evaluateLeaf(leafIndex(child));
+        } else {
+          pending.clear();
+          pending.emplace_back(std::numeric_limits<double>::infinity(), child);
+          while (!pending.empty()) {
+            const auto [bound, ref] = pending.back();
+            pending.pop_back();
+            if (!(bound > worst)) continue;
+            if (isLeafRef(ref)) {
+              evaluateLeaf(leafIndex(ref));
+              continue;
+            }
+            // Bound each slot by a ball around its box: sqrt(d(centre, T)) + half diagonal
+            // (the box is converted back from scaled coordinates and holds its vertices with a
+            // float margin, far above the rounding of this bound; the 1e-6 slack covers the
+            // rest). Visit the farthest first (pushed last).
+            const Node8& m = nodes[ref];
+            const size_t first = pending.size();
+            for (int j = 0; j < 8; ++j) {
+              if (m.child[j] == kEmptyChild) continue;
+              Vec3 lo, hi;
+              for (int axis = 0; axis < 3; ++axis) {
+                lo[axis] = m.lower[axis][j] / scale;
+                hi[axis] = m.upper[axis][j] / scale;
+              }
+              const Vec3 centre = h.center() + 0.5 * (lo + hi);
+              const double reach = std::sqrt(squaredDistanceToTriangle(centre, a, b, c)) + 0.5 * (hi - lo).norm();
+              const double squared_reach = reach * reach * (1 + 1e-6);
+              if (squared_reach > worst) pending.emplace_back(squared_reach, m.child[j]);
+            }
+            std::sort(pending.begin() + static_cast<std::ptrdiff_t>(first), pending.end(),
+                      [](const auto& x, const auto& y) { return x.first < y.first; });
           }
         }
         // Rounded up, with a relative margin for the rounding of the distance computation.
@@ -156,6 +193,7 @@ TreeGeometry Hierarchy::restGeometry() const {
   g.center = center_;
   g.box_scale = box_scale_;
   g.version = rest_version_;
+  g.lineage = rest_version_;
   return g;
 }
 

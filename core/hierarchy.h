@@ -50,6 +50,12 @@ struct TreeGeometry {
   double box_scale = 1;
   uint64_t version = 0;                        // unique in the process: a new value from
                                                // nextGeometryVersion() whenever it changes
+  // Geometries of one lineage share the hierarchy (a body deforming step by step): between
+  // two of them every vertex moved by at most the difference of their drift values (a running
+  // sum of per-change bounds), so coherent state can follow the faces. A new lineage (a
+  // nextGeometryVersion() value) whenever that bound is not kept.
+  uint64_t lineage = 0;
+  double drift = 0;
 };
 
 // A process-wide unique, never-zero geometry version (thread-safe). Every geometry, and every

@@ -262,9 +262,12 @@ TriangleHit QueryStream::hitOn(TriangleIndex face, const Vec3& p) const {
 }
 
 // Depth-first search from the root with best squared distance start2 (best_face holds its face).
-// With reach > 0, every face within sqrt(best) + reach (as best shrinks) is gathered into
-// gathered_. Returns the best squared distance; best_face is its face.
-double QueryStream::depthFirst(const Vec3& p, double start2, double reach, TriangleIndex& best_face) {
+// With reach > 0, the faces within sqrt(best) + reach (as best shrinks) are gathered into
+// gathered_, at most the nearest capacity + 1 of them (the search narrows to the farthest kept
+// once that many are found), and pruned_lower_ bounds from below the distance of every face not
+// gathered. Returns the best squared distance; best_face is its face.
+double QueryStream::depthFirst(const Vec3& p, double start2, double reach, TriangleIndex& best_face,
+                               uint32_t capacity) {
   const Hierarchy& h = *hierarchy_;
   const TreeGeometry& g = geometry();
   const ScaledPoint sp = scalePoint(g, p);
@@ -279,6 +282,9 @@ double QueryStream::depthFirst(const Vec3& p, double start2, double reach, Trian
   };
   double gather2 = limit2();
   float threshold = pruneThreshold(gather2, scale2);
+  // With reach > 0: the smallest box bound pruned and squared distance not gathered.
+  float pruned_box = kFloatInf;
+  double pruned_face2 = kInf;
   stack_.clear();
   stack_.push_back({0, 0.0f});
   float dist[8];
@@ -286,7 +292,10 @@ double QueryStream::depthFirst(const Vec3& p, double start2, double reach, Trian
   while (!stack_.empty()) {
     const StackEntry entry = stack_.back();
     stack_.pop_back();
-    if (entry.bound > threshold) continue;
+    if (entry.bound > threshold) {
+      pruned_box = std::min(pruned_box, entry.bound);
+      continue;
+    }
     if (isLeafRef(entry.ref)) {
       const int32_t leaf = leafIndex(entry.ref);
       const uint32_t used = testLeaf(leaf, p, exact);
@@ -298,8 +307,25 @@ double QueryStream::depthFirst(const Vec3& p, double start2, double reach, Trian
       }
       if (reach > 0) {
         gather2 = limit2();
-        for (uint32_t lane = 0; lane < used; ++lane)
-          if (exact[lane] <= gather2) gathered_.emplace_back(exact[lane], lanes[8 * leaf + lane]);
+        if (gathered_.size() > capacity) gather2 = std::min(gather2, gathered_.front().first);
+        for (uint32_t lane = 0; lane < used; ++lane) {
+          if (!(exact[lane] <= gather2)) {
+            pruned_face2 = std::min(pruned_face2, exact[lane]);
+            continue;
+          }
+          // The nearest capacity + 1 faces, as a max-heap once full: its top is then the
+          // farthest the set can reach, so nothing beyond it needs opening.
+          gathered_.emplace_back(exact[lane], lanes[8 * leaf + lane]);
+          if (gathered_.size() == capacity + 1) {
+            std::make_heap(gathered_.begin(), gathered_.end());
+          } else if (gathered_.size() > capacity + 1) {
+            std::push_heap(gathered_.begin(), gathered_.end());
+            std::pop_heap(gathered_.begin(), gathered_.end());
+            pruned_face2 = std::min(pruned_face2, gathered_.back().first);
+            gathered_.pop_back();
+          }
+          if (gathered_.size() > capacity) gather2 = std::min(gather2, gathered_.front().first);
+        }
       } else {
         gather2 = best2;
       }
@@ -317,7 +343,11 @@ double QueryStream::depthFirst(const Vec3& p, double start2, double reach, Trian
     float open_key[8];
     int count = 0;
     for (int k = 0; k < 8; ++k) {
-      if (node.child[k] == kEmptyChild || dist[k] > threshold) continue;
+      if (node.child[k] == kEmptyChild) continue;
+      if (dist[k] > threshold) {
+        pruned_box = std::min(pruned_box, dist[k]);
+        continue;
+      }
       int i = count++;
       while (i > 0 && open_key[i - 1] < order[k]) { open[i] = open[i - 1]; open_key[i] = open_key[i - 1]; --i; }
       open[i] = {node.child[k], dist[k]};
@@ -327,6 +357,10 @@ double QueryStream::depthFirst(const Vec3& p, double start2, double reach, Trian
     // The closest child is popped next: start loading it.
     if (count > 0) prefetchChild(g, open[count - 1].ref);
     if (count > 1) prefetchChild(g, open[count - 2].ref);
+  }
+  if (reach > 0) {
+    pruned_lower_ = std::sqrt(pruned_face2);
+    if (pruned_box < kFloatInf && !sp.far) pruned_lower_ = std::min(pruned_lower_, boxLowerBound(pruned_box, 1.0 / g.box_scale));
   }
   return best2;
 }
@@ -338,21 +372,27 @@ double QueryStream::depthFirst(const Vec3& p, double start2, double reach, Trian
 double QueryStream::gatherCandidates(const Vec3& p, double start2, double reach, uint32_t capacity,
                                      TriangleIndex& best_face) {
   gathered_.clear();
-  const double best2 = depthFirst(p, start2, reach, best_face);
+  const double best2 = depthFirst(p, start2, reach, best_face, capacity);
   const double limit = std::sqrt(best2) + reach;
+  // Everything never gathered is strictly farther than `limit`, and at least pruned_lower_
+  // (the smallest bound depthFirst pruned); so is what the filter drops.
+  double outside = pruned_lower_;
   size_t kept = 0;
-  for (const auto& entry : gathered_)
-    if (std::sqrt(entry.first) <= limit) gathered_[kept++] = entry;
+  for (const auto& entry : gathered_) {
+    const double d = std::sqrt(entry.first);
+    if (d <= limit) gathered_[kept++] = entry;
+    else outside = std::min(outside, d);
+  }
   gathered_.resize(kept);
-  // Everything never gathered is strictly farther than `limit`. If too many were gathered,
-  // keep the nearest (a partial selection, not a sort): the reach drops to the first left out.
+  // If too many were gathered, keep the nearest (a partial selection, not a sort): the reach
+  // drops to the first left out.
   if (gathered_.size() > capacity) {
     std::nth_element(gathered_.begin(), gathered_.begin() + capacity, gathered_.end());
     const double first_out = std::sqrt(gathered_[capacity].first);
     gathered_.resize(capacity);
     return first_out;
   }
-  return std::nextafter(limit, kInf);
+  return std::max(std::nextafter(limit, kInf), outside);
 }
 
 ClosestPoint QueryStream::closest(const Vec3& p) {
@@ -442,26 +482,39 @@ ClosestPoint QueryStream::closestCoherent(const Vec3& p) {
   return out;
 }
 
-ClosestPoint QueryStream::closestCoherent(const Vec3& p, CoherentState& state, bool* certified_out) {
+ClosestPoint QueryStream::closestCoherent(const Vec3& p, CoherentState& state, bool* certified_out,
+                                          double max_distance) {
   const TreeGeometry& g = geometry();
   const Mesh& mesh = hierarchy_->mesh();
   counters_ = {};
-  // The previous face warm-starts the search even on changed geometry (any face's distance
-  // bounds the answer); the cached set is used only on the geometry it was gathered on.
-  const bool warm = state.last_face < mesh.triangles.size();
-  if (warm) {
-    const float step = static_cast<float>((p - state.last_point).norm());
-    state.mean_step = state.mean_step > 0 ? 0.9f * state.mean_step + 0.1f * step : step;
+  if (!p.allFinite()) {
+    if (certified_out) *certified_out = false;
+    const float reach_steps = state.reach_steps;
+    state = CoherentState{};
+    state.reach_steps = reach_steps;
+    ClosestPoint out;
+    out.distance = out.lower = out.upper = std::numeric_limits<double>::quiet_NaN();
+    return out;
+  }
+  // Within a lineage faces move by at most the change of the geometry's drift: the previous
+  // face warm-starts the search and the set's certificate shrinks by that much.
+  const bool same_lineage = state.lineage != 0 && state.lineage == g.lineage;
+  const double cap = max_distance >= 0 ? max_distance : 0;  // NaN: 0
+  if (same_lineage) {
+    const double step = (p - state.last_point).norm() + (g.drift - state.last_drift);
+    state.mean_step = state.mean_step > 0 ? 0.9f * state.mean_step + 0.1f * static_cast<float>(step)
+                                          : static_cast<float>(step);
   }
   TriangleIndex face = kInvalidIndex;
   bool certified = false;
-  if (warm && state.count > 0 && state.version == g.version) {
-    const double moved = (p - state.anchor).norm();
+  double best2 = kInf;
+  if (same_lineage && state.has_set) {
+    const double moved = (p - state.anchor).norm() + (g.drift - state.drift_at);
     if (moved < state.reach) {
-      // The candidates, gathered eight at a time into the block kernel.
-      double best2 = kInf;
+      // The nearest eight first; the rest only if they could be closer (or within the cap).
       double exact[8];
       for (uint32_t first = 0; first < state.count; first += 8) {
+        if (first == 8 && state.rest_lower - moved > std::min(std::sqrt(best2), cap) * (1 + 1e-9)) break;
         const uint32_t lanes = std::min<uint32_t>(8, state.count - first);
         for (uint32_t lane = 0; lane < 8; ++lane) {
           const Triangle& t = mesh.triangles[state.faces[first + (lane < lanes ? lane : 0)]];
@@ -469,42 +522,66 @@ ClosestPoint QueryStream::closestCoherent(const Vec3& p, CoherentState& state, b
             for (int axis = 0; axis < 3; ++axis) gather_.v[k][axis][lane] = g.positions[t[k]][axis];
         }
         squaredDistancesToBlock(p, gather_, exact);
+        counters_.triangles_tested += lanes;
         for (uint32_t lane = 0; lane < lanes; ++lane) {
           const TriangleIndex f = state.faces[first + lane];
           if (exact[lane] < best2 || (exact[lane] == best2 && f < face)) { best2 = exact[lane]; face = f; }
         }
       }
-      counters_.triangles_tested = state.count;
-      certified = std::sqrt(best2) + moved < state.reach * (1 - 1e-9);
+      // Every face outside the set is at least reach - moved away: nothing there is closer
+      // than the best candidate, or within the cap when no candidate is.
+      certified = std::min(std::sqrt(best2), cap) + moved < state.reach * (1 - 1e-9);
+      if (certified && !(best2 <= cap * cap * (1 + 1e-12))) face = kInvalidIndex;
     }
   }
   if (!certified) {
-    const double reach = 2.0 * std::max(static_cast<double>(state.reach_steps) * state.mean_step,
-                                        1e-6 / g.box_scale);
-    double start2 = kInf;
+    // Start from the previous face's distance, or the cap if smaller (slightly widened: a face
+    // at exactly the cap is found).
+    double start2 = cap < kInf ? cap * cap * (1 + 1e-12) : kInf;
     face = kInvalidIndex;
-    if (warm) {
+    if (same_lineage && state.last_face < mesh.triangles.size()) {
       const Triangle& t = mesh.triangles[state.last_face];
-      start2 = squaredDistanceToTriangle(p, g.positions[t[0]], g.positions[t[1]], g.positions[t[2]]);
-      face = state.last_face;
+      const double last2 = squaredDistanceToTriangle(p, g.positions[t[0]], g.positions[t[1]], g.positions[t[2]]);
+      if (last2 < start2) {
+        start2 = last2;
+        face = state.last_face;
+      }
     }
-    const double set_reach = gatherCandidates(p, start2, reach, kCoherentSetSize, face);
-    state.count = static_cast<uint32_t>(gathered_.size());
-    for (uint32_t i = 0; i < state.count; ++i) state.faces[i] = gathered_[i].second;
-    state.anchor = p;
-    state.reach = state.count > 0 ? set_reach : 0;
-    state.version = g.version;
+    state.has_set = false;
+    if (state.reach_steps > 0) {
+      // A stationary point still gets a certificate: a reach of at least 1e-6 of the mesh size.
+      const double reach = 2.0 * std::max(static_cast<double>(state.reach_steps) * state.mean_step,
+                                          1e-6 / g.box_scale);
+      const double set_reach = gatherCandidates(p, start2, reach, kCoherentSetSize, face);
+      // The nearest eight first (a partial selection): the rest are tested only when needed.
+      state.rest_lower = std::numeric_limits<float>::infinity();
+      if (gathered_.size() > 8) {
+        std::nth_element(gathered_.begin(), gathered_.begin() + 8, gathered_.end());
+        state.rest_lower = std::nextafter(static_cast<float>(std::sqrt(gathered_[8].first)), 0.0f);
+      }
+      state.count = static_cast<uint32_t>(gathered_.size());
+      for (uint32_t i = 0; i < state.count; ++i) state.faces[i] = gathered_[i].second;
+      state.anchor = p;
+      state.reach = set_reach;
+      state.drift_at = g.drift;
+      state.has_set = set_reach > 0;  // infinite: every face is in the set
+    } else {
+      depthFirst(p, start2, 0, face);
+    }
   }
   if (certified_out) *certified_out = certified;
   ClosestPoint out;
-  if (face == kInvalidIndex) {
-    out.distance = out.lower = out.upper = std::numeric_limits<double>::quiet_NaN();
-    state = CoherentState{};
+  if (face == kInvalidIndex) {  // nothing within the cap: farther than cap
+    out.distance = out.upper = kInf;
+    out.lower = cap;
   } else {
     fillFromHit(out, hitOn(face, p));
     state.last_face = face;
-    state.last_point = p;
   }
+  if (!same_lineage && face == kInvalidIndex) state.last_face = kInvalidIndex;
+  state.lineage = g.lineage;
+  state.last_point = p;
+  state.last_drift = g.drift;
   out.counters = counters_;
   return out;
 }

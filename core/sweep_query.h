@@ -6,6 +6,7 @@
 // and allocation-free once warm. One stream per thread.
 #include "core/hierarchy.h"
 
+#include <limits>
 #include <memory>
 #include <vector>
 
@@ -65,17 +66,24 @@ struct CoherenceCounters {
 
 // Compact coherent state of one moving point against one mesh (a cloth vertex against a body):
 // zero-initialised (default-constructed) means a cold start. Used with
-// QueryStream::closestCoherent(p, state), where the stream lends its scratch memory; the state
-// keeps only the certificate: an anchor, a reach and up to kCoherentSetSize candidate faces.
+// QueryStream::closestCoherent(p, state, ...), where the stream lends its scratch memory; the
+// state keeps only the certificate: an anchor, a reach and up to kCoherentSetSize candidate
+// faces, the nearest eight first. It stays valid while the geometry moves within its lineage
+// (TreeGeometry::lineage, ::drift): a deforming body's faces are re-read at their current
+// positions and the certificate shrinks by how far they may have moved.
 inline constexpr uint32_t kCoherentSetSize = 32;
 struct CoherentState {
   Vec3 anchor = Vec3::Zero();        // where the candidate set was gathered
-  double reach = 0;                  // every face outside the set is at least this far from anchor
-  uint64_t version = 0;              // geometry version the set was gathered on
-  TriangleIndex last_face = kInvalidIndex;
-  uint32_t count = 0;                // candidate faces (0: cold)
-  float mean_step = 0;               // running mean of the point's step length
-  float reach_steps = 6;             // R = reach_steps * mean_step (see CoherenceOptions)
+  double reach = 0;                  // every face outside the set was at least this far from anchor
+  double drift_at = 0;               // the geometry's drift when the set was gathered
+  double last_drift = 0;             // the geometry's drift at the last query
+  uint64_t lineage = 0;              // geometry lineage of the set and last face (0: cold)
+  TriangleIndex last_face = kInvalidIndex;  // closest face of the last query (within its cap)
+  uint32_t count = 0;                // candidate faces
+  float rest_lower = 0;              // faces[8..count) were at least this far from anchor
+  float mean_step = 0;               // running mean of the point's motion relative to the mesh
+  float reach_steps = 2;             // R = reach_steps * mean_step (see CoherenceOptions); 0: no set
+  bool has_set = false;              // anchor, reach and faces hold a certificate
   Vec3 last_point = Vec3::Zero();
   TriangleIndex faces[kCoherentSetSize];
 };
@@ -122,10 +130,14 @@ class QueryStream {
 
   // The same for a caller-held compact state (one per moving point and mesh); this stream only
   // lends scratch memory, so one stream per thread serves any number of states. `certified`
-  // (optional) tells whether the cached set answered. Same answers as closest(). A state
-  // belongs to one mesh; its set is dropped when the geometry's version changes (deforming
-  // bodies), its previous face still warm-starts the search.
-  ClosestPoint closestCoherent(const Vec3& p, CoherentState& state, bool* certified = nullptr);
+  // (optional) tells whether the cached set answered. A state belongs to one mesh; its set
+  // survives changes of the geometry within a lineage (deforming bodies), else only its
+  // previous face warm-starts the search.
+  // With max_distance finite the question is "the closest face within max_distance": the same
+  // answer as closest() when that is within max_distance (up to a relative 1e-12), else no face
+  // (triangle kInvalidIndex, distance +infinity), found or certified without looking farther.
+  ClosestPoint closestCoherent(const Vec3& p, CoherentState& state, bool* certified = nullptr,
+                               double max_distance = std::numeric_limits<double>::infinity());
 
   // The paper's dynamic process for a moving point: the priority front persists between calls;
   // moving by delta lowers every bound by delta (a drift offset, O(1)), stale entries are
@@ -174,7 +186,8 @@ class QueryStream {
   TriangleHit hitOn(TriangleIndex face, const Vec3& p) const;
   double gatherCandidates(const Vec3& p, double start2, double reach, uint32_t capacity,
                           TriangleIndex& best_face);
-  double depthFirst(const Vec3& p, double start2, double reach, TriangleIndex& best_face);
+  double depthFirst(const Vec3& p, double start2, double reach, TriangleIndex& best_face,
+                    uint32_t capacity = 0);
   double entryBound(const DriftEntry& e, const Vec3& p, const float q[3], bool far) const;
   void frontStart(const Vec3& p);
   void frontMove(const Vec3& p);
@@ -201,6 +214,7 @@ class QueryStream {
   std::vector<TriangleIndex> set_faces_;    // [candidate]
   std::vector<TriangleBlock8> set_blocks_;  // candidates' coordinates, 8 per block
   std::vector<std::pair<double, TriangleIndex>> gathered_;
+  double pruned_lower_ = 0;  // depthFirst with reach > 0: a lower bound on what it did not gather
   bool has_last_ = false;
   Vec3 last_point_ = Vec3::Zero();
   TriangleIndex last_face_ = kInvalidIndex;

@@ -27,6 +27,7 @@ DeformingBody::DeformingBody(std::shared_ptr<const Hierarchy> hierarchy)
   geometry_.center = h.center();
   geometry_.box_scale = h.boxScale();
   geometry_.version = nextGeometryVersion();
+  geometry_.lineage = geometry_.version;
 }
 
 void DeformingBody::checkSize(size_t count, const char* what) const {
@@ -47,6 +48,7 @@ void DeformingBody::anchor(const std::vector<Vec3>& positions) {
   nodes_ = anchor_nodes_;
   std::fill(delta_.begin(), delta_.end(), 0.0);
   geometry_.version = nextGeometryVersion();
+  geometry_.lineage = geometry_.version;  // positions replaced: coherent state starts over
 }
 
 void DeformingBody::inflate(double delta) { inflate(std::vector<double>(positions_.size(), delta)); }
@@ -96,6 +98,7 @@ void DeformingBody::inflate(const std::vector<double>& delta) {
   for (size_t v = 0; v < positions_.size(); ++v) {
     if ((positions_[v] - anchor_positions_[v]).norm() > delta_[v]) {
       positions_ = anchor_positions_;
+      geometry_.lineage = nextGeometryVersion();  // positions replaced: coherent state starts over
       break;
     }
   }
@@ -105,6 +108,7 @@ void DeformingBody::inflate(const std::vector<double>& delta) {
 DisplacementCheck DeformingBody::setPositions(const std::vector<Vec3>& positions) {
   checkSize(positions.size(), "positions");
   DisplacementCheck check;
+  double moved2 = 0;  // how far the farthest vertex moves: the lineage's drift grows by that
   for (size_t v = 0; v < positions.size(); ++v) {
     if (!positions[v].allFinite())
       throw std::invalid_argument("DeformingBody: position " + std::to_string(v) + " is not finite");
@@ -114,10 +118,12 @@ DisplacementCheck DeformingBody::setPositions(const std::vector<Vec3>& positions
       check.excess = excess;
       check.worst_vertex = static_cast<VertexIndex>(v);
     }
+    moved2 = std::max(moved2, (positions[v] - positions_[v]).squaredNorm());
   }
   if (!check.accepted) return check;
   positions_ = positions;
   geometry_.version = nextGeometryVersion();
+  geometry_.drift += std::sqrt(moved2) * (1 + 1e-12);
   return check;
 }
 

@@ -66,6 +66,7 @@ KeyframeBody::KeyframeBody(std::shared_ptr<const Hierarchy> hierarchy,
   geometry_.center = h.center();
   geometry_.box_scale = h.boxScale();
   geometry_.version = nextGeometryVersion();
+  geometry_.lineage = geometry_.version;
   setTime(0);
 }
 
@@ -117,7 +118,13 @@ void KeyframeBody::setTime(double t) {
   const double s = last == 0 ? 0.0 : time_ - static_cast<double>(f);
   const std::vector<Vec3>& a = frames_[f];
   const std::vector<Vec3>& b = frames_[last == 0 ? 0 : f + 1];
-  for (size_t v = 0; v < positions_.size(); ++v) positions_[v] = (1 - s) * a[v] + s * b[v];
+  double moved2 = 0;  // how far the farthest vertex moved: the lineage's drift grows by that
+  for (size_t v = 0; v < positions_.size(); ++v) {
+    const Vec3 x = (1 - s) * a[v] + s * b[v];
+    moved2 = std::max(moved2, (x - positions_[v]).squaredNorm());
+    positions_[v] = x;
+  }
+  geometry_.drift += std::sqrt(moved2) * (1 + 1e-12);
 }
 
 }  // namespace meshsweeper

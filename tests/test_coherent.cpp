@@ -5,6 +5,7 @@
 //   the truth with upper - lower <= tol;
 //   kClosestCoherent(p, 5)                     distances == bruteForceKClosest;
 //   closestCoherent(p, CoherentState)          (caller-held compact state) == brute force;
+//   closestCoherent(p, CoherentState, cap)     == brute force within the cap, else no face;
 //   a warm (coherent) answer equals a cold one (a fresh QueryStream::closest).
 // Paths (fixed seeds) on armadillo, holes, a torus, an icosphere and a random soup: steps of
 // 0.05% and 0.5% of the bounding-box diagonal, points 0-5% of the diagonal from the surface,
@@ -28,6 +29,7 @@
 #include <algorithm>
 #include <cmath>
 #include <filesystem>
+#include <limits>
 #include <map>
 #include <memory>
 #include <sstream>
@@ -247,6 +249,7 @@ struct Streams {
   CoherenceOptions options;
   QueryStream coherent, exact, anytime, k, cold;
   CoherentState state;
+  CoherentState capped[3];  // closestCoherent(p, state, ..., cap) for kCaps
   explicit Streams(const std::shared_ptr<const Hierarchy>& h, CoherenceOptions o = {})
       : options(o), coherent(h, o), exact(h, o), anytime(h, o), k(h, o), cold(h, o) {}
 };
@@ -255,6 +258,8 @@ struct PathChecks {
   Failures coherent{"closestCoherent vs brute force"};
   Failures state{"closestCoherent(p, CoherentState) vs brute force"};
   size_t state_certified = 0;
+  Failures capped{"closestCoherent(p, CoherentState, max_distance) vs brute force"};
+  size_t capped_certified = 0, capped_none = 0, capped_hits = 0;
   Failures exact{"closestWithinCoherent(p, 0) vs brute force"};
   Failures anytime{"closestWithinCoherent(p, tol)"};
   Failures k{"kClosestCoherent(p, 5) vs bruteForceKClosest"};
@@ -263,6 +268,7 @@ struct PathChecks {
 };
 
 constexpr size_t kK = 5;
+constexpr double kCaps[3] = {0.002, 0.01, 0.03};  // max_distance, fractions of the diagonal
 
 // Runs every coherent kind along `path` and checks each step against brute force.
 void checkPath(const Mesh& mesh, const std::vector<Vec3>& path,
@@ -284,6 +290,26 @@ void checkPath(const Mesh& mesh, const std::vector<Vec3>& path,
     const ClosestPoint compact = s.cold.closestCoherent(p, s.state, &certified);
     checker.exact(compact, p, truth, checks.state);
     checks.state_certified += certified;
+    // With a cap: the exact answer within it, else none (and nothing closer than the cap).
+    for (int c = 0; c < 3; ++c) {
+      const double cap = kCaps[c] * checker.diagonal;
+      bool capped_certified = false;
+      const ClosestPoint r = s.cold.closestCoherent(p, s.capped[c], &capped_certified, cap);
+      checks.capped_certified += capped_certified;
+      const double t = truth.closest();
+      if (t <= cap * (1 - 1e-9)) {
+        checker.exact(r, p, truth, checks.capped);
+        ++checks.capped_hits;
+      } else if (t > cap * (1 + 1e-9)) {
+        checks.capped.check(r.triangle == kInvalidIndex && r.distance == std::numeric_limits<double>::infinity() &&
+                                r.lower <= t,
+                            [&] {
+                              return "cap " + num(cap) + ": brute force " + num(t) + ", got triangle " +
+                                     std::to_string(r.triangle) + " at " + num(r.distance) + ", lower " + num(r.lower);
+                            });
+        ++checks.capped_none;
+      }
+    }
     const ClosestPoint cold = s.cold.closest(p);
     checks.warm.check(checker.same(warm.distance, cold.distance) &&
                           (warm.triangle != cold.triangle || (warm.point == cold.point && warm.barycentric == cold.barycentric)),
@@ -358,6 +384,10 @@ void checkMesh(const Case& c, size_t steps, uint64_t seed) {
     checkPath(mesh, path, s, checks, 1e-3 * diagonal);
     checkSetCounters(s.coherent, path.size(), spec.step < 0.001);
     if (spec.step < 0.001) CHECK(checks.state_certified > 0);
+    // The capped queries saw both answers, and certified some.
+    CHECK(checks.capped_hits > 0);
+    CHECK(checks.capped_none > 0);
+    if (spec.step < 0.001) CHECK(checks.capped_certified > 0);
     // Every jump restarts the dynamic front (plus the first step).
     CHECK(s.exact.coherence().front_resets >= jumps.size() + 1);
     CHECK(s.k.coherence().front_resets >= jumps.size() + 1);

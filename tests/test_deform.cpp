@@ -415,6 +415,7 @@ void checkKeyframes(const Mesh& mesh, size_t frame_count, size_t points_per_time
   k.setGeometry(&body.geometry());
   std::vector<TriangleHit> hits;
   CoherentState state;  // a caller-held compact state, on the k stream's scratch memory
+  size_t certified_steps = 0;
   for (size_t i = 0; i < path.size(); ++i) {
     const double t = end * static_cast<double>(i) / static_cast<double>(path.size() - 1);
     INFO("mesh " << mesh.name << ", path step " << i << ", t = " << num(t) << ", point " << text(path[i]));
@@ -424,10 +425,14 @@ void checkKeyframes(const Mesh& mesh, size_t frame_count, size_t points_per_time
     const std::vector<BruteHit> truth = bruteForceKClosest(now, path[i], 5);
     checker.exact(coherent.closestCoherent(path[i]), path[i], truth.front(), checks.coherent);
     checker.exact(front.closestWithinCoherent(path[i], 0), path[i], truth.front(), checks.front);
-    checker.exact(k.closestCoherent(path[i], state), path[i], truth.front(), checks.state);
+    bool certified = false;
+    checker.exact(k.closestCoherent(path[i], state, &certified), path[i], truth.front(), checks.state);
+    certified_steps += certified;
     k.kClosestCoherent(path[i], 5, hits);
     checker.hits(hits, truth, path[i], checks.k_coherent);
   }
+  // The state's set survives setTime (same lineage, bounded drift).
+  CHECK(certified_steps > 0);
 }
 
 // ---- Inflated bounds ------------------------------------------------------------------------
@@ -576,10 +581,18 @@ void checkInflated(const Mesh& mesh, size_t points, size_t path_steps, uint64_t 
     body.anchor(mesh.positions);
     body.inflate(delta);
     const std::vector<Vec3> path = walk(mesh, h, path_steps, seed + 40);
-    QueryStream coherent(h), front(h);
+    QueryStream coherent(h), front(h), compact(h);
     coherent.setGeometry(&body.geometry());
     front.setGeometry(&body.geometry());
+    compact.setGeometry(&body.geometry());
     Failures coherent_f("closestCoherent on a deforming body"), front_f("closestWithinCoherent on a deforming body");
+    // Caller-held states follow the faces from step to step (the geometry's lineage and
+    // drift): their certificates survive the deformation.
+    Failures state_f("closestCoherent(p, CoherentState) on a deforming body");
+    Failures capped_f("closestCoherent(p, CoherentState, cap) on a deforming body");
+    CoherentState state, capped;
+    size_t certified_steps = 0;
+    const double cap = 0.01 * diagonal;
     for (size_t i = 0; i < path.size(); ++i) {
       const double amount = 0.9 * delta * std::sin(0.03 * static_cast<double>(i));
       const std::vector<Vec3> next = add(mesh.positions, displacement(mesh, std::abs(amount), 0.01 * static_cast<double>(i)));
@@ -590,7 +603,18 @@ void checkInflated(const Mesh& mesh, size_t points, size_t path_steps, uint64_t 
       const BruteHit truth = bruteForceClosest(now, path[i]);
       checker.exact(coherent.closestCoherent(path[i]), path[i], truth, coherent_f);
       checker.exact(front.closestWithinCoherent(path[i], 0), path[i], truth, front_f);
+      bool certified = false;
+      checker.exact(compact.closestCoherent(path[i], state, &certified), path[i], truth, state_f);
+      certified_steps += certified;
+      const ClosestPoint r = compact.closestCoherent(path[i], capped, &certified, cap);
+      certified_steps += certified;
+      if (truth.distance <= cap * (1 - 1e-9))
+        checker.exact(r, path[i], truth, capped_f);
+      else if (truth.distance > cap * (1 + 1e-9))
+        capped_f.check(r.triangle == kInvalidIndex && r.lower <= truth.distance,
+                       [&] { return "cap " + num(cap) + ", brute force " + num(truth.distance) + ": got a face"; });
     }
+    CHECK(certified_steps > 0);
   }
 }
 
