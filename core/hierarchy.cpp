@@ -159,8 +159,26 @@ void refitBounds(const Hierarchy& h, const Vec3* positions, std::vector<Node8>& 
   });
 }
 
+LeafVertices leafVertices(const Hierarchy& h) {
+  const auto& lanes = h.leafTriangles();
+  const Mesh& mesh = h.mesh();
+  const size_t leaves = lanes.size() / 8;
+  LeafVertices out;
+  out.offsets.reserve(leaves + 1);
+  out.offsets.push_back(0);
+  for (size_t leaf = 0; leaf < leaves; ++leaf) {
+    const size_t first = out.vertices.size();
+    for (uint32_t lane = 0; lane < h.leafLanes(static_cast<int32_t>(leaf)); ++lane)
+      for (VertexIndex v : mesh.triangles[lanes[8 * leaf + lane]])
+        if (std::find(out.vertices.begin() + first, out.vertices.end(), v) == out.vertices.end())
+          out.vertices.push_back(v);
+    out.offsets.push_back(static_cast<uint32_t>(out.vertices.size()));
+  }
+  return out;
+}
+
 void slotDisplacements(const Hierarchy& h, const std::vector<double>& w, std::vector<double>& subtree,
-                       std::vector<double>& corners) {
+                       std::vector<double>& corners, const LeafVertices* leaf_vertices) {
   const auto& nodes = h.nodes();
   const auto& lanes = h.leafTriangles();
   const Mesh& mesh = h.mesh();
@@ -171,7 +189,11 @@ void slotDisplacements(const Hierarchy& h, const std::vector<double>& w, std::ve
       const ChildRef c = nodes[node].child[k];
       if (c == kEmptyChild) continue;
       double worst = 0;
-      if (isLeafRef(c)) {
+      if (isLeafRef(c) && leaf_vertices) {
+        const int32_t leaf = leafIndex(c);
+        for (uint32_t i = leaf_vertices->offsets[leaf]; i < leaf_vertices->offsets[leaf + 1]; ++i)
+          worst = std::max(worst, w[leaf_vertices->vertices[i]]);
+      } else if (isLeafRef(c)) {
         for (uint32_t lane = 0; lane < h.leafLanes(leafIndex(c)); ++lane)
           for (VertexIndex v : mesh.triangles[lanes[8 * leafIndex(c) + lane]]) worst = std::max(worst, w[v]);
       } else {

@@ -150,13 +150,22 @@ class Hierarchy {
 void refitBounds(const Hierarchy& h, const Vec3* positions, std::vector<Node8>& nodes, bool radii,
                  bool boxes = true);
 
+// The distinct vertices of each leaf block's faces, CSR: leaf l's are
+// vertices[offsets[l] .. offsets[l + 1]). For slotDisplacements when it runs often.
+struct LeafVertices {
+  std::vector<uint32_t> offsets;
+  std::vector<VertexIndex> vertices;
+};
+LeafVertices leafVertices(const Hierarchy& h);
+
 // How far each slot's bounds can be pushed when every vertex v moves at most w[v] (w >= 0,
 // one per mesh vertex; DESIGN.md section 3), per slot [8 * node + slot]: `subtree` = the largest
 // w among the slot's subtree vertices (its box grows by that), `corners` = the largest w among
 // its triangle's corners (its radius grows by subtree + corners). Empty slots get 0. One
-// bottom-up pass.
+// bottom-up pass; `leaf_vertices` (optional, from leafVertices(h)) makes it read each leaf's
+// vertices once.
 void slotDisplacements(const Hierarchy& h, const std::vector<double>& w, std::vector<double>& subtree,
-                       std::vector<double>& corners);
+                       std::vector<double>& corners, const LeafVertices* leaf_vertices = nullptr);
 
 // The float margin that covers query-point rounding for boxes whose scaled coordinates reach
 // `extent` in magnitude (see Hierarchy::boxScale()).

@@ -13,10 +13,32 @@
 
 namespace meshsweeper {
 
+namespace {
+
+// A float no smaller than x >= 0, without a branch: x is raised by more than float rounding
+// can take off (2^-24 relative for normal floats, 2^-150 absolute below them).
+inline float floatAtLeast(double x) { return static_cast<float>(x * (1 + 0x1p-23) + 0x1p-148); }
+
+// The largest |coordinate| of any used box (scaled units).
+double boxExtent(const std::vector<Node8>& nodes) {
+  double extent = 0;
+  for (const Node8& n : nodes)
+    for (int axis = 0; axis < 3; ++axis)
+      for (int k = 0; k < 8; ++k) {
+        if (n.child[k] == kEmptyChild) continue;
+        extent = std::max({extent, std::abs(static_cast<double>(n.lower[axis][k])),
+                           std::abs(static_cast<double>(n.upper[axis][k]))});
+      }
+  return extent;
+}
+
+}  // namespace
+
 DeformingBody::DeformingBody(std::shared_ptr<const Hierarchy> hierarchy)
     : hierarchy_(std::move(hierarchy)) {
   const Hierarchy& h = *hierarchy_;
   anchor_nodes_ = h.nodes();
+  anchor_extent_ = boxExtent(anchor_nodes_);
   nodes_ = anchor_nodes_;
   anchor_positions_ = h.mesh().positions;
   positions_ = anchor_positions_;
@@ -45,6 +67,7 @@ void DeformingBody::anchor(const std::vector<Vec3>& positions) {
   positions_ = positions;
   anchor_nodes_ = hierarchy_->nodes();
   refitBounds(*hierarchy_, anchor_positions_.data(), anchor_nodes_, true);
+  anchor_extent_ = boxExtent(anchor_nodes_);
   nodes_ = anchor_nodes_;
   std::fill(delta_.begin(), delta_.end(), 0.0);
   geometry_.version = nextGeometryVersion();
@@ -55,36 +78,45 @@ void DeformingBody::inflate(double delta) { inflate(std::vector<double>(position
 
 void DeformingBody::inflate(const std::vector<double>& delta) {
   checkSize(delta.size(), "the displacement bounds");
-  for (size_t v = 0; v < delta.size(); ++v)
-    if (!(delta[v] >= 0) || !std::isfinite(delta[v]))
+  // One pass: the bounds' validity (nothing changes if one is bad) and whether the current
+  // positions stay within the new bounds.
+  bool bad = false, outside = false;
+  constexpr double kMax = std::numeric_limits<double>::max();
+  for (size_t v = 0; v < delta.size(); ++v) {  // branch-free: the compiler vectorises it
+    bad |= !(delta[v] >= 0 && delta[v] <= kMax);
+    // Squared, with a relative 1e-12 that the bounds' own slack covers (eps carries 1e-9,
+    // boxes a float rounding up).
+    outside |= (positions_[v] - anchor_positions_[v]).squaredNorm() > delta[v] * delta[v] * (1 + 1e-12);
+  }
+  for (size_t v = 0; bad && v < delta.size(); ++v)
+    if (!(delta[v] >= 0 && delta[v] <= kMax))
       throw std::invalid_argument("DeformingBody: displacement bound " + std::to_string(v) +
                                   " must be finite and >= 0");
   const Hierarchy& h = *hierarchy_;
-  const float inf = std::numeric_limits<float>::infinity();
   const double scale = h.boxScale();
   // How far each slot's subtree and corners may move (one bottom-up pass).
-  std::vector<double> subtree, corners;
-  slotDisplacements(h, delta, subtree, corners);
-  double extent = 0;
+  if (leaf_vertices_.offsets.empty()) leaf_vertices_ = leafVertices(h);
+  slotDisplacements(h, delta, subtree_, corners_, &leaf_vertices_);
+  float largest_grow = 0;
   for (size_t node = 0; node < anchor_nodes_.size(); ++node) {
     const Node8& a = anchor_nodes_[node];
     Node8& out = nodes_[node];
     out = a;
     for (int k = 0; k < 8; ++k) {
       if (a.child[k] == kEmptyChild) continue;
-      const double worst = subtree[8 * node + k];
-      out.eps[k] = std::nextafter(static_cast<float>((a.eps[k] + worst + corners[8 * node + k]) * (1 + 1e-9)), inf);
-      const float grow = std::nextafter(static_cast<float>(worst * scale), inf);
+      const double worst = subtree_[8 * node + k];
+      out.eps[k] = floatAtLeast((a.eps[k] + worst + corners_[8 * node + k]) * (1 + 1e-9));
+      const float grow = floatAtLeast(worst * scale);
+      largest_grow = std::max(largest_grow, grow);
       for (int axis = 0; axis < 3; ++axis) {
         out.lower[axis][k] = a.lower[axis][k] - grow;
         out.upper[axis][k] = a.upper[axis][k] + grow;
-        extent = std::max({extent, std::abs(static_cast<double>(out.lower[axis][k])),
-                           std::abs(static_cast<double>(out.upper[axis][k]))});
       }
     }
   }
-  // Boxes reaching beyond the anchor's extent need a wider query-rounding margin.
-  const float margin = boxMargin(extent) - boxMargin(1.0);
+  // Boxes reaching beyond the anchor's extent need a wider query-rounding margin (a bound on
+  // the new extent: the anchor's plus the largest growth).
+  const float margin = boxMargin(anchor_extent_ + largest_grow) - boxMargin(1.0);
   if (margin > 0) {
     for (Node8& n : nodes_)
       for (int axis = 0; axis < 3; ++axis)
@@ -95,12 +127,9 @@ void DeformingBody::inflate(const std::vector<double>& delta) {
   }
   delta_ = delta;
   // Current positions outside the new bounds fall back to the anchor positions.
-  for (size_t v = 0; v < positions_.size(); ++v) {
-    if ((positions_[v] - anchor_positions_[v]).norm() > delta_[v]) {
-      positions_ = anchor_positions_;
-      geometry_.lineage = nextGeometryVersion();  // positions replaced: coherent state starts over
-      break;
-    }
+  if (outside) {
+    positions_ = anchor_positions_;
+    geometry_.lineage = nextGeometryVersion();  // positions replaced: coherent state starts over
   }
   geometry_.version = nextGeometryVersion();
 }

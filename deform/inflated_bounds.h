@@ -55,6 +55,9 @@ class DeformingBody {
   std::vector<Vec3> anchor_positions_;  // [vertex]
   std::vector<Vec3> positions_;         // [vertex] current
   std::vector<double> delta_;           // [vertex] displacement bounds
+  double anchor_extent_ = 0;            // largest |box coordinate| of anchor_nodes_
+  std::vector<double> subtree_, corners_;  // inflate()'s per-slot displacements (reused)
+  LeafVertices leaf_vertices_;             // built by the first inflate()
   TreeGeometry geometry_;
 };
 
