@@ -5,14 +5,14 @@
 //   vertex pass: query every vertex of A on B, in Morton order, in fixed chunks of 64 (one
 //     query stream per thread, each query warm-started from the previous one's closest face);
 //     LB <- the largest vertex distance
-//   every triangle of A is a cell; UB(cell) <- min(bisector bound, face bounds) (below)
+//   every triangle of A is a cell; UB(cell) <- the cover bound, else the bisector bound (below)
 //   max-heap of cells on UB
 //   repeat (round):
 //     threshold <- LB + tol   (symmetric: the larger LB of the two directions + tol)
 //     pop up to `batch` cells with UB > threshold (the highest first)
 //     their edge midpoints: one sample per edge, shared with every cell that has that edge
 //       (hash map keyed by the edge's two sample ids); query the new ones (Morton order,
-//       parallel chunks)
+//       parallel chunks; each warm-started from the closest face of its edge's nearer end)
 //     LB <- max(LB, new sample distances)
 //     each popped cell -> 4 children (corners and edge midpoints); bound each child;
 //       push it if its UB > threshold, else it is final ("dropped")
@@ -45,17 +45,25 @@
 // (planes nearly parallel to t) thus costs the cap, never a wrong bound. It is skipped when
 // the circumradius of c0 c1 c2 exceeds the cap (then f > cap there, so it is not in t).
 //
-// ---- The face bound ----
-// d(x, T) for one triangle T of B is convex in x, so over t it peaks at a corner:
-// d(x, B) <= min over T in {T0, T1, T2} (the corners' closest triangles) of max_k d(v_k, T).
-// The same holds for any convex piece P of t with P's corners. So t is also bounded piecewise
-// over the four pieces of its midpoint split (the corner triangles (v_k, m_k,k+1, m_k-1,k) and
-// the middle one (m01, m12, m20)): max over pieces P of min over T of max over P's corners of
-// d(y, T). This is never above the whole-triangle face bound (each piece lies in t) and much
-// lower when the corners' closest triangles differ, since each corner piece uses its own; on
-// the armadillo and mannequin pairs it cut the triangles refined by about 40% (the bound is
-// evaluated only when the bisector bound does not already make the cell final).
-// UB(t) = min(bisector bound, face bound, piecewise face bound).
+// ---- The cover bound ----
+// d(x, T) for one triangle T of B is convex in x, so over any triangle P it peaks at P's
+// corners: max over P of d(x, B) <= min over T of max over P's corners y of d(y, T). The
+// candidates T are the faces of the hierarchy's leaf blocks (8 spatially grouped faces of B,
+// tested 8 at a time) that hold the cell's corners' closest triangles: at most 24 faces, not
+// only the 3 closest ones, so a cell much larger than B's triangles (the coarse-to-fine
+// direction) can still be covered. The cell is covered as a whole, or its four midpoint pieces
+// each, recursively up to kCoverLevels levels (64 pieces), splitting only the pieces that no
+// single candidate covers; no point of B is queried for this, the pieces' corners are only
+// measured against the candidates. Only whether the bound is <= `enough` (the cell is then
+// final) matters for cells that would be split anyway, so a piece takes the first candidate
+// that brings it below, and the bound is the largest over the pieces. When some piece has no
+// such candidate the cell gets the bisector bound (capped by min_i max_k |v_k - c_i|), which
+// orders the heap. A ball around each leaf block skips blocks too far from a point.
+// On the armadillo, bunny and mannequin pairs (1e-4) this made 3.5-5x fewer cells split than
+// the bisector bound with the face bound of the 3 closest triangles over the cell and its four
+// midpoint pieces (which the cover bound contains: the same pieces, more candidates).
+// The pieces' corners are midpoints computed in double: the pieces cover the cell up to gaps of
+// the order of the rounding of a coordinate, which the margin below covers (f is 1-Lipschitz).
 //
 // Each bound gets a margin of 1e-12 times the largest coordinate magnitude of A and B, which
 // covers the rounding of the distances themselves.
@@ -281,124 +289,174 @@ double bisectorBound(const Vec3 v[3], const Vec3 c_in[3], double scale) {
   return std::max(best, value);
 }
 
-// A ball around each triangle of B (centroid, farthest corner): a cheap lower bound on the
-// distance to the triangle, to abandon face-bound candidates early.
-struct TriangleBall {
+// A ball around each leaf block of B (box centre, farthest corner): a point farther than
+// radius + target from it is farther than target from all eight faces.
+struct BlockBall {
   Vec3 centre;
   double radius;
 };
 
-std::vector<TriangleBall> triangleBalls(const Mesh& b) {
-  std::vector<TriangleBall> balls(b.triangles.size());
-  for (size_t f = 0; f < balls.size(); ++f) {
-    const Triangle& t = b.triangles[f];
-    const Vec3 centre = (b.positions[t[0]] + b.positions[t[1]] + b.positions[t[2]]) / 3;
+std::vector<BlockBall> blockBalls(const Hierarchy& b) {
+  const std::vector<TriangleBlock8>& blocks = b.leafBlocks();
+  std::vector<BlockBall> balls(blocks.size());
+  for (size_t leaf = 0; leaf < blocks.size(); ++leaf) {
+    const TriangleBlock8& block = blocks[leaf];
+    Vec3 lower = Vec3::Constant(kInf), upper = Vec3::Constant(-kInf);
+    for (int k = 0; k < 3; ++k) {
+      for (int lane = 0; lane < 8; ++lane) {
+        const Vec3 x(block.v[k][0][lane], block.v[k][1][lane], block.v[k][2][lane]);
+        lower = lower.cwiseMin(x);
+        upper = upper.cwiseMax(x);
+      }
+    }
+    const Vec3 centre = 0.5 * (lower + upper);
     double r2 = 0;
-    for (VertexIndex v : t) r2 = std::max(r2, (b.positions[v] - centre).squaredNorm());
-    balls[f] = {centre, std::sqrt(r2) * (1 + 1e-12)};
+    for (int k = 0; k < 3; ++k) {
+      for (int lane = 0; lane < 8; ++lane) {
+        const Vec3 x(block.v[k][0][lane], block.v[k][1][lane], block.v[k][2][lane]);
+        r2 = std::max(r2, (x - centre).squaredNorm());
+      }
+    }
+    balls[leaf] = {centre, std::sqrt(r2) * (1 + 1e-12)};
   }
   return balls;
 }
 
+// What the cover bound reads of B: its leaf blocks, which block holds each face, their balls.
+struct CoverContext {
+  const TriangleBlock8* blocks;    // [leaf] the hierarchy's leaf blocks (original faces)
+  const uint32_t* face_leaf;       // [triangle of B] the leaf block that holds it
+  const BlockBall* balls;          // [leaf]
+};
+
+// Levels of midpoint pieces the cover bound may split a cell into (4^3 = 64 pieces at most).
+// Measured on the bunny pair: 2 levels split 30% more cells, 4 levels gain nothing.
+constexpr int kCoverLevels = 3;
+constexpr int kMaxCandidateBlocks = 3;  // one per corner
+
+// A corner of a piece with its squared distances to the candidate blocks, computed on demand.
+struct CoverPoint {
+  Vec3 position = Vec3::Zero();
+  uint32_t known = 0;                    // bit u: block u measured
+  uint8_t within[kMaxCandidateBlocks];   // [block] lanes within target (bit per lane)
+  alignas(64) double squared[kMaxCandidateBlocks][8];  // [block][lane]
+};
+
+// Covers pieces of one cell with single faces of the candidate blocks (see the file comment).
+class Cover {
+ public:
+  Cover(const CoverContext& context, const uint32_t* leaves, int blocks, double target)
+      : context_(context), leaves_(leaves), blocks_(blocks), target_(target),
+        target2_(target * target) {}
+
+  // Largest over the pieces of (a, b, c) of the squared bound of its covering face, or +inf
+  // when some piece `levels` splits deep has no candidate face within target of its corners.
+  // `hint`: the block that covered the previous piece, tried first.
+  double piece(CoverPoint& a, CoverPoint& b, CoverPoint& c, int levels, int& hint) const {
+    for (int i = 0; i < blocks_; ++i) {
+      const int u = i == 0 ? hint : (i <= hint ? i - 1 : i);
+      const double m = coverWith(a, b, c, u);
+      if (m <= target2_) {
+        hint = u;
+        return m;
+      }
+    }
+    if (levels <= 0) return kInf;
+    CoverPoint mid[3];
+    mid[0].position = 0.5 * (a.position + b.position);
+    mid[1].position = 0.5 * (b.position + c.position);
+    mid[2].position = 0.5 * (c.position + a.position);
+    CoverPoint* pieces[4][3] = {{&a, &mid[0], &mid[2]},
+                                {&mid[0], &b, &mid[1]},
+                                {&mid[2], &mid[1], &c},
+                                {&mid[0], &mid[1], &mid[2]}};
+    double worst = 0;
+    for (auto& p : pieces) {
+      const double m = piece(*p[0], *p[1], *p[2], levels - 1, hint);
+      if (!(m <= target2_)) return kInf;
+      worst = std::max(worst, m);
+    }
+    return worst;
+  }
+
+ private:
+  const CoverContext& context_;
+  const uint32_t* leaves_;  // [block] candidate leaf blocks
+  int blocks_;
+  double target_, target2_;
+
+  // Lanes of block u within target of the point (measured once per point and block).
+  unsigned within(CoverPoint& q, int u) const {
+    if (q.known >> u & 1) return q.within[u];
+    q.known |= 1u << u;
+    const uint32_t leaf = leaves_[u];
+    const BlockBall& ball = context_.balls[leaf];
+    const double reach = ball.radius + target_;
+    unsigned mask = 0;
+    if ((q.position - ball.centre).squaredNorm() <= reach * reach) {
+      squaredDistancesToBlock(q.position, context_.blocks[leaf], q.squared[u]);
+      for (int lane = 0; lane < 8; ++lane)
+        mask |= static_cast<unsigned>(q.squared[u][lane] <= target2_) << lane;
+    }
+    q.within[u] = static_cast<uint8_t>(mask);
+    return mask;
+  }
+
+  // min over the faces of block u within target of all three corners of the largest of their
+  // squared distances; +inf when there is none. Corners already measured are checked first.
+  double coverWith(CoverPoint& a, CoverPoint& b, CoverPoint& c, int u) const {
+    CoverPoint* corners[3] = {&a, &b, &c};
+    unsigned mask = 0xff;
+    for (int k = 0; k < 3 && mask; ++k)
+      if (corners[k]->known >> u & 1) mask &= corners[k]->within[u];
+    for (int k = 0; k < 3 && mask; ++k)
+      if (!(corners[k]->known >> u & 1)) mask &= within(*corners[k], u);
+    double best = kInf;
+    for (; mask; mask &= mask - 1) {
+      const int lane = __builtin_ctz(mask);
+      best = std::min(best, std::max({a.squared[u][lane], b.squared[u][lane], c.squared[u][lane]}));
+    }
+    return best;
+  }
+};
+
 // An upper bound of d(x, B) over the cell (s0, s1, s2). Only whether it is <= `enough` (the
-// cell is then final) matters for cells that will be split anyway, so the costlier face bounds
-// are tried only when the bisector bound is above `enough`, and only until they prove or fail
-// to prove `enough`: the result is the first bound <= `enough` found, else the bisector bound.
-CellBound boundCell(const Sample& s0, const Sample& s1, const Sample& s2, const Mesh& b,
-                    const std::vector<TriangleBall>& balls, double scale, double margin,
-                    double enough) {
+// cell is then final) matters for cells that will be split anyway: the cover bound is the
+// first covering found; when it fails, the bisector bound (which may still be <= enough).
+CellBound boundCell(const Sample& s0, const Sample& s1, const Sample& s2,
+                    const CoverContext& context, double scale, double margin, double enough) {
   const Sample* s[3] = {&s0, &s1, &s2};
   // One closest triangle for all corners: the face bound is exact at the corners.
   if (s0.closest_triangle == s1.closest_triangle && s0.closest_triangle == s2.closest_triangle)
     return {std::max({s0.distance, s1.distance, s2.distance}) * (1 + 1e-13) + margin, true};
   const Vec3 v[3] = {s0.position, s1.position, s2.position};
-  const Vec3 c[3] = {s0.closest, s1.closest, s2.closest};
-  const double bisector = bisectorBound(v, c, scale) + margin;
-  if (bisector <= enough) return {bisector, false};
   // Squared distances below target2 give a bound <= enough once the margins are added.
   const double target = (enough - margin) / (1 + 1e-13);
-  if (!(target > 0)) return {bisector, false};
-  const double target2 = target * target;
-  auto bound = [&](double squared) {
-    return CellBound{std::sqrt(squared) * (1 + 1e-13) + margin, true};
-  };
-
-  // Candidates: the corners' closest triangles.
-  TriangleIndex candidates[3];
-  int count = 0;
-  for (int k = 0; k < 3; ++k) {
-    bool seen = false;
-    for (int u = 0; u < count; ++u) seen = seen || candidates[u] == s[k]->closest_triangle;
-    if (!seen) candidates[count++] = s[k]->closest_triangle;
-  }
-  // max(known2, squared distances from `points` to `candidate`), or a value > target2 as soon
-  // as one point (by the triangle's ball, then exactly) exceeds it.
-  auto farthest2 = [&](TriangleIndex candidate, const Vec3* points, int n, double known2) {
-    const TriangleBall& ball = balls[candidate];
-    const double reach = ball.radius + target;
-    for (int q = 0; q < n; ++q)
-      if ((points[q] - ball.centre).squaredNorm() >= reach * reach) return kInf;
-    const Triangle& tri = b.triangles[candidate];
-    const Vec3& p0 = b.positions[tri[0]];
-    const Vec3& p1 = b.positions[tri[1]];
-    const Vec3& p2 = b.positions[tri[2]];
-    double m = known2;
-    for (int q = 0; q < n && m <= target2; ++q)
-      m = std::max(m, squaredDistanceToTriangle(points[q], p0, p1, p2));
-    return m;
-  };
-  // The known squared distance of corner k to `candidate`, or 0 when not known.
-  auto known2 = [&](int k, TriangleIndex candidate) {
-    return s[k]->closest_triangle == candidate ? s[k]->distance * s[k]->distance : 0.0;
-  };
-
-  // Face bound over the whole cell: the corners whose closest triangle is the candidate are
-  // known; the others are computed.
-  for (int u = 0; u < count; ++u) {
-    Vec3 others[3];
-    int n = 0;
-    double known = 0;
+  if (target > 0) {
+    uint32_t leaves[kMaxCandidateBlocks];
+    int blocks = 0;
     for (int k = 0; k < 3; ++k) {
-      if (s[k]->closest_triangle == candidates[u])
-        known = std::max(known, known2(k, candidates[u]));
-      else
-        others[n++] = v[k];
+      const uint32_t leaf = context.face_leaf[s[k]->closest_triangle];
+      bool seen = false;
+      for (int u = 0; u < blocks; ++u) seen = seen || leaves[u] == leaf;
+      if (!seen) leaves[blocks++] = leaf;
     }
-    const double m = farthest2(candidates[u], others, n, known);
-    if (m <= target2) return bound(m);
+    const Cover cover(context, leaves, blocks, target);
+    CoverPoint corners[3];
+    for (int k = 0; k < 3; ++k) corners[k].position = v[k];
+    int hint = 0;
+    const double squared = cover.piece(corners[0], corners[1], corners[2], kCoverLevels, hint);
+    if (squared <= target * target) return {std::sqrt(squared) * (1 + 1e-13) + margin, true};
   }
-
-  // Face bound over the pieces of the midpoint split: the corner triangles
-  // (v_k, m_k,k+1, m_k-1,k), each trying its own corner's closest triangle first, and the
-  // middle one (m01, m12, m20). Every piece must get below target2 with some candidate.
-  const Vec3 mid[3] = {0.5 * (v[0] + v[1]), 0.5 * (v[1] + v[2]), 0.5 * (v[2] + v[0])};
-  double pieces2 = 0;
-  for (int k = 0; k <= 3; ++k) {
-    Vec3 points[3];
-    int n = 0;
-    if (k < 3) {
-      points[n++] = mid[k];
-      points[n++] = mid[(k + 2) % 3];
-    } else {
-      points[0] = mid[0], points[1] = mid[1], points[2] = mid[2];
-      n = 3;
-    }
-    const TriangleIndex first = s[k % 3]->closest_triangle;
-    double piece2 = kInf;
-    for (int u = -1; u < count && !(piece2 <= target2); ++u) {
-      const TriangleIndex candidate = u < 0 ? first : candidates[u];
-      if (u >= 0 && candidate == first) continue;
-      if (k < 3 && s[k]->closest_triangle != candidate) {
-        points[n] = v[k];  // the corner's distance to this candidate is not known
-        piece2 = farthest2(candidate, points, n + 1, 0);
-      } else {
-        piece2 = farthest2(candidate, points, n, k < 3 ? known2(k, candidate) : 0.0);
-      }
-    }
-    if (!(piece2 <= target2)) return {bisector, false};
-    pieces2 = std::max(pieces2, piece2);
+  // Not covered: the bisector bound, capped by min_i max_k |v_k - c_i| (valid on all of t).
+  const Vec3 c[3] = {s0.closest, s1.closest, s2.closest};
+  double cap2 = kInf;
+  for (int i = 0; i < 3; ++i) {
+    double m = 0;
+    for (int k = 0; k < 3; ++k) m = std::max(m, (v[k] - c[i]).squaredNorm());
+    cap2 = std::min(cap2, m);
   }
-  return bound(pieces2);
+  return {std::min(bisectorBound(v, c, scale), std::sqrt(cap2)) + margin, false};
 }
 
 // ---- Parallel helpers ------------------------------------------------------------------
@@ -437,7 +495,13 @@ class Direction {
         margin_(kMarginRelative * scale),
         parallel_(parallel),
         streams_(to_),
-        balls_(triangleBalls(to_->mesh())) {}
+        balls_(blockBalls(*to_)),
+        face_leaf_(to_->mesh().triangles.size(), 0) {
+    const std::vector<TriangleIndex>& lanes = to_->leafTriangles();
+    for (size_t i = 0; i < lanes.size(); ++i)
+      if (lanes[i] != kInvalidIndex) face_leaf_[lanes[i]] = static_cast<uint32_t>(i / 8);
+    cover_ = CoverContext{to_->leafBlocks().data(), face_leaf_.data(), balls_.data()};
+  }
 
   // Queries every used vertex of A (Morton order, fixed chunks); LB <- the largest distance.
   void sampleVertices() {
@@ -487,8 +551,8 @@ class Direction {
         const Triangle& t = a.triangles[f];
         Cell& cell = cells_[f];
         cell = Cell{{t[0], t[1], t[2]}, static_cast<TriangleIndex>(f), 0, 0, false};
-        const CellBound bound = boundCell(samples_[t[0]], samples_[t[1]], samples_[t[2]],
-                                          to_->mesh(), balls_, scale_, margin_, threshold);
+        const CellBound bound = boundCell(samples_[t[0]], samples_[t[1]], samples_[t[2]], cover_,
+                                          scale_, margin_, threshold);
         cell.upper = bound.upper;
         wins += bound.face_won;
       }
@@ -546,6 +610,10 @@ class Direction {
         Sample m;
         m.position = 0.5 * (samples_[s].position + samples_[t].position);
         m.source = cell.source;
+        // Warm start of its query (replaced by the answer): the nearer end's closest face.
+        m.closest_triangle = samples_[s].distance <= samples_[t].distance
+                                 ? samples_[s].closest_triangle
+                                 : samples_[t].closest_triangle;
         samples_.push_back(m);
       }
     }
@@ -586,7 +654,7 @@ class Direction {
                        false};
           const CellBound bound =
               boundCell(samples_[corners[k][0]], samples_[corners[k][1]], samples_[corners[k][2]],
-                        to_->mesh(), balls_, scale_, margin_, threshold);
+                        cover_, scale_, margin_, threshold);
           child.upper = bound.upper;
           wins += bound.face_won;
         }
@@ -655,7 +723,9 @@ class Direction {
   double scale_, margin_;
   bool parallel_;
   tbb::enumerable_thread_specific<QueryStream> streams_;
-  std::vector<TriangleBall> balls_;  // [triangle of B]
+  std::vector<BlockBall> balls_;     // [leaf block of B]
+  std::vector<uint32_t> face_leaf_;  // [triangle of B] its leaf block
+  CoverContext cover_{};
 
   std::vector<Sample> samples_;  // [sample] vertices of A first (sample id = vertex index)
   std::vector<Cell> cells_;      // [cell] triangles of A first (cell id = triangle index)
@@ -693,9 +763,11 @@ class Direction {
   }
 
   // The one place a sample meets B: an exact query warm-started from the previous sample's
-  // closest face (QueryStream::closestCoherent, its search radius starts at the distance to that
-  // face). The state is per chunk, so answers (ties included) depend on the chunk, never on
-  // the thread. The coherent query's set certificate is switched off (reach_steps = 0): it
+  // closest face, or for a midpoint from its edge's nearer end's closest face (set in
+  // CoherentState::last_face; QueryStream::closestCoherent's search radius starts at the
+  // distance to that face; ~7% fewer triangles tested on the bunny pair than the previous
+  // sample's face, which after the Morton sort of a sparse batch is often far). The state is
+  // per chunk, so answers (ties included) depend on the chunk, never on the thread. The coherent query's set certificate is switched off (reach_steps = 0): it
   // gathers every face within d + 2R, thousands when, as here, the point is far from B relative
   // to B's triangles, and measured 20-70x slower; the warm start alone tests ~25% fewer
   // triangles than a fresh closest().
@@ -713,7 +785,9 @@ class Direction {
       CoherentState state;  // cold at each chunk start
       state.reach_steps = 0;
       for (size_t i = begin; i < end; ++i) {
-        querySample(stream, state, samples_[ids[i]]);
+        Sample& s = samples_[ids[i]];
+        if (s.closest_triangle != kInvalidIndex) state.last_face = s.closest_triangle;
+        querySample(stream, state, s);
         tested += stream.counters().triangles_tested;
       }
       triangles_tested_ += tested;

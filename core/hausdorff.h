@@ -10,10 +10,12 @@
 // computation stops once upper - lower <= tolerance.
 //
 // Method: query every vertex of A for its closest point on B; bound every triangle of A from
-// above with the closest points of its corners (bisector bound, paper Fig. 9) and their
-// closest triangles (face bounds, over the triangle and over the four pieces of its midpoint
-// split); split the triangles whose bound is highest into four by their edge midpoints until
-// the highest bound is within the tolerance of the best sample. See hausdorff.cpp.
+// above by covering it, whole or in up to 64 midpoint pieces, with single faces of B taken from
+// the hierarchy's leaf blocks that hold its corners' closest triangles (cover bound: the
+// distance to one face is convex, so it peaks at a piece's corners), else with the closest
+// points of its corners (bisector bound, paper Fig. 9); split the triangles whose bound is
+// highest into four by their edge midpoints until the highest bound is within the tolerance of
+// the best sample. See hausdorff.cpp.
 //
 // Visiting order: the paper visits samples along "peels" (spiral triangle strips, Fig. 8) so
 // successive queries are close and the coherent query pays off. A prototype measured that
@@ -66,7 +68,7 @@ struct HausdorffCounters {
   uint64_t triangles_tested = 0;   // exact point-triangle distances inside those queries
   uint64_t triangles_refined = 0;  // (sub)triangles of A split into four
   uint64_t cells = 0;              // (sub)triangles bounded (original triangles included)
-  uint64_t face_bound_wins = 0;    // cells where a face bound beat the bisector bound
+  uint64_t face_bound_wins = 0;    // cells bounded by faces of B (cover bound), not bisectors
   uint32_t rounds = 0;             // refinement rounds
 };
 

@@ -303,6 +303,91 @@ TEST_CASE("grid with a raised vertex: h(raised, flat) is the height, mean and RM
   CHECK(std::isnan(one.b_to_a.lower));
 }
 
+// The coarse-to-fine direction, where the cover bound does most of the work: two triangles over
+// a fine grid with one vertex sunk into a pit. Every corner of the coarse square is at distance
+// 0 and its closest faces are flat ones far from the pit, so the maximum lies inside a coarse
+// triangle, thousands of fine faces away from the corners' leaf blocks; a cover bound that
+// covered a piece with a face that is not within reach of all its corners would stop at once
+// with an upper bound near 0.
+TEST_CASE("a coarse square over a fine grid with a pit: the maximum inside a coarse cell") {
+  const int n = 48;
+  const double depth = 0.05;
+  const Mesh coarse = scenes::gridPlane(1, 1.0);
+  Mesh fine = scenes::gridPlane(n, 1.0);
+  const VertexIndex pit = 16 * (n + 1) + 32;  // x = 1/6, y = -1/6: inside coarse triangle 0
+  fine.positions[pit].z() = -depth;
+  const Vec3 above(fine.positions[pit].x(), fine.positions[pit].y(), 0);
+  const double at_pit = bruteDistance(fine, above);
+  REQUIRE(at_pit > 0.2 * depth);
+
+  const double tol = 1e-6;
+  HausdorffOptions options = absolute(tol, 1);
+  options.tighten_both = true;
+  const HausdorffResult result = hausdorff(coarse, fine, options);
+  CHECK(result.converged);
+  CHECK(result.a_to_b.upper >= at_pit);
+  CHECK(result.a_to_b.lower >= at_pit - tol);
+  CHECK(result.a_to_b.upper - result.a_to_b.lower <= tol);
+  CHECK(result.b_to_a.lower == Approx(depth).margin(1e-15));  // the pit's vertex
+  CHECK(result.upper - result.lower <= tol);
+  checkAgainstBruteForce(result.a_to_b, coarse, fine, 2000, 11);
+  checkAgainstBruteForce(result.b_to_a, fine, coarse, 2000, 12);
+  // A dense grid of points of the coarse square around the pit: none is farther than upper.
+  double around = 0;
+  for (int i = -20; i <= 20; ++i)
+    for (int j = -20; j <= 20; ++j)
+      around = std::max(around, bruteDistance(fine, above + Vec3(i, j, 0) * (1.5 / n / 20)));
+  CHECK(around <= result.a_to_b.upper + 1e-12);
+  CHECK(around >= at_pit);
+
+  options.threads = 2;
+  const HausdorffResult two = hausdorff(coarse, fine, options);
+  requireIdentical(result.a_to_b, two.a_to_b);
+  requireIdentical(result.b_to_a, two.b_to_a);
+
+  // Loose tolerances: the corners are at distance 0, so a bound that wrongly covered the pit's
+  // neighbourhood would stop below the true value; pits in other places of the grid (the same
+  // shape: at_pit is the same) move the maximum across the cells' midpoint pieces.
+  for (const VertexIndex other : {VertexIndex(16 * (n + 1) + 32), VertexIndex(9 * (n + 1) + 21),
+                                  VertexIndex(30 * (n + 1) + 13), VertexIndex(40 * (n + 1) + 7)}) {
+    Mesh moved = scenes::gridPlane(n, 1.0);
+    moved.positions[other].z() = -depth;
+    for (const double loose : {0.2, 0.5, 0.8}) {
+      INFO("pit vertex " << other << ", tolerance " << loose << " x the pit's distance");
+      const HausdorffResult r = hausdorffOneSided(coarse, moved, absolute(loose * at_pit, 1));
+      CHECK(r.upper >= at_pit);
+      CHECK(r.lower <= at_pit + 1e-12);
+      CHECK(r.upper - r.lower <= loose * at_pit);
+    }
+  }
+}
+
+// A known answer where the cover bound must combine many candidate faces: B is a grid of points
+// (degenerate triangles) at height h with spacing g over the square A (two triangles), so
+// h(A, B) = sqrt(h^2 + g^2 / 2), reached at the centres of the grid's squares, none of them a
+// vertex or an edge midpoint of A. A piece of A is covered only by a point within target of all
+// three of its corners; a cover bound that skipped a corner or a piece, or read another
+// block's distances, would stop below the exact value at the looser tolerances.
+TEST_CASE("a coarse square over a grid of points: the exact maximum between the points") {
+  const double h = 0.01;
+  for (const int n : {20, 23}) {
+    const double g = 1.0 / n;
+    std::vector<Vec3> points;
+    for (int i = 0; i <= n; ++i)
+      for (int j = 0; j <= n; ++j) points.emplace_back(-0.5 + j * g, -0.5 + i * g, h);
+    const Mesh b = pointCloud(points);
+    const Mesh a = scenes::gridPlane(1, 1.0);
+    const double exact = std::sqrt(h * h + 0.5 * g * g);
+    for (const double tol : {1e-7, 0.1 * (exact - h), 0.5 * (exact - h), 0.9 * (exact - h)}) {
+      INFO(n << " x " << n << " points, tolerance " << tol);
+      const HausdorffResult r = hausdorffOneSided(a, b, absolute(tol, 1));
+      CHECK(r.upper >= exact - 1e-12);
+      CHECK(r.lower <= exact + 1e-12);
+      CHECK(r.upper - r.lower <= tol);
+    }
+  }
+}
+
 TEST_CASE("identical meshes: zero") {
   for (const Mesh& mesh :
        {scenes::icosphere(3), scenes::torus(1, 0.3, 24, 12), scenes::gridPlane(5)}) {
