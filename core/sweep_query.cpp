@@ -395,6 +395,19 @@ double QueryStream::gatherCandidates(const Vec3& p, double start2, double reach,
   return std::max(std::nextafter(limit, kInf), outside);
 }
 
+// Puts the nearest eight faces of gathered_ (squared distance, face) first (a partial
+// selection, not a sort). block_lower[b] (b < blocks) receives a lower bound on the distance of
+// every face in blocks b.. (rounded down): 0 for block 0, the least distance past the first
+// eight for the others; a query can skip the later blocks once that is farther than its best.
+void QueryStream::orderIntoBlocks(float* block_lower, size_t blocks) {
+  float rest = kFloatInf;
+  if (gathered_.size() > 8) {
+    std::nth_element(gathered_.begin(), gathered_.begin() + 8, gathered_.end());
+    rest = std::nextafter(static_cast<float>(std::sqrt(gathered_[8].first)), 0.0f);
+  }
+  for (size_t b = 0; b < blocks; ++b) block_lower[b] = b == 0 ? 0.0f : rest;
+}
+
 ClosestPoint QueryStream::closest(const Vec3& p) {
   counters_ = {};
   TriangleIndex face = kInvalidIndex;
@@ -425,15 +438,19 @@ ClosestPoint QueryStream::closestCoherent(const Vec3& p) {
       double best2 = kInf;
       double exact[8];
       const size_t count = set_faces_.size();
+      size_t tested = 0;
       for (size_t b = 0; b < set_blocks_.size(); ++b) {
+        // The nearest eight first: stop once the rest cannot be closer than the best.
+        if (b == 1 && set_block_lower_[b] - moved > std::sqrt(best2) * (1 + 1e-9)) break;
         squaredDistancesToBlock(p, set_blocks_[b], exact);
+        tested += std::min<size_t>(8, count - 8 * b);
         const size_t lanes = std::min<size_t>(8, count - 8 * b);
         for (size_t lane = 0; lane < lanes; ++lane) {
           const TriangleIndex f = set_faces_[8 * b + lane];
           if (exact[lane] < best2 || (exact[lane] == best2 && f < face)) { best2 = exact[lane]; face = f; }
         }
       }
-      counters_.triangles_tested = static_cast<uint32_t>(count);
+      counters_.triangles_tested = static_cast<uint32_t>(tested);
       // Certificate: every face outside the set is at least set_reach_ - moved away.
       certified = std::sqrt(best2) + moved < set_reach_ * (1 - 1e-9);
     }
@@ -454,6 +471,8 @@ ClosestPoint QueryStream::closestCoherent(const Vec3& p) {
     const double set_reach = gatherCandidates(p, start2, reach, options_.max_candidates, face);
     set_faces_.clear();
     set_blocks_.resize((gathered_.size() + 7) / 8);
+    set_block_lower_.resize(set_blocks_.size());
+    orderIntoBlocks(set_block_lower_.data(), set_blocks_.size());
     for (size_t i = 0; i < set_blocks_.size() * 8; ++i) {
       const TriangleIndex f = gathered_[std::min(i, gathered_.size() - 1)].second;
       if (i < gathered_.size()) set_faces_.push_back(f);
@@ -514,7 +533,7 @@ ClosestPoint QueryStream::closestCoherent(const Vec3& p, CoherentState& state, b
       // The nearest eight first; the rest only if they could be closer (or within the cap).
       double exact[8];
       for (uint32_t first = 0; first < state.count; first += 8) {
-        if (first == 8 && state.rest_lower - moved > std::min(std::sqrt(best2), cap) * (1 + 1e-9)) break;
+        if (first == 8 && state.block_lower[1] - moved > std::min(std::sqrt(best2), cap) * (1 + 1e-9)) break;
         const uint32_t lanes = std::min<uint32_t>(8, state.count - first);
         for (uint32_t lane = 0; lane < 8; ++lane) {
           const Triangle& t = mesh.triangles[state.faces[first + (lane < lanes ? lane : 0)]];
@@ -553,12 +572,8 @@ ClosestPoint QueryStream::closestCoherent(const Vec3& p, CoherentState& state, b
       const double reach = 2.0 * std::max(static_cast<double>(state.reach_steps) * state.mean_step,
                                           1e-6 / g.box_scale);
       const double set_reach = gatherCandidates(p, start2, reach, kCoherentSetSize, face);
-      // The nearest eight first (a partial selection): the rest are tested only when needed.
-      state.rest_lower = std::numeric_limits<float>::infinity();
-      if (gathered_.size() > 8) {
-        std::nth_element(gathered_.begin(), gathered_.begin() + 8, gathered_.end());
-        state.rest_lower = std::nextafter(static_cast<float>(std::sqrt(gathered_[8].first)), 0.0f);
-      }
+      // The nearest eight first: the rest are tested only when needed.
+      orderIntoBlocks(state.block_lower, kCoherentSetSize / 8);
       state.count = static_cast<uint32_t>(gathered_.size());
       for (uint32_t i = 0; i < state.count; ++i) state.faces[i] = gathered_[i].second;
       state.anchor = p;

@@ -80,12 +80,12 @@ struct CoherentState {
   uint64_t lineage = 0;              // geometry lineage of the set and last face (0: cold)
   TriangleIndex last_face = kInvalidIndex;  // closest face of the last query (within its cap)
   uint32_t count = 0;                // candidate faces
-  float rest_lower = 0;              // faces[8..count) were at least this far from anchor
   float mean_step = 0;               // running mean of the point's motion relative to the mesh
   float reach_steps = 2;             // R = reach_steps * mean_step (see CoherenceOptions); 0: no set
   bool has_set = false;              // anchor, reach and faces hold a certificate
   Vec3 last_point = Vec3::Zero();
-  TriangleIndex faces[kCoherentSetSize];
+  TriangleIndex faces[kCoherentSetSize];        // the nearest eight to anchor first
+  float block_lower[kCoherentSetSize / 8] = {};  // faces[8b..count) were at least this far
 };
 
 // One entry of the dynamic front, for pictures and diagnostics: the triangle whose swept
@@ -186,6 +186,7 @@ class QueryStream {
   TriangleHit hitOn(TriangleIndex face, const Vec3& p) const;
   double gatherCandidates(const Vec3& p, double start2, double reach, uint32_t capacity,
                           TriangleIndex& best_face);
+  void orderIntoBlocks(float* block_lower, size_t blocks);
   double depthFirst(const Vec3& p, double start2, double reach, TriangleIndex& best_face,
                     uint32_t capacity = 0);
   double entryBound(const DriftEntry& e, const Vec3& p, const float q[3], bool far) const;
@@ -213,6 +214,7 @@ class QueryStream {
   double set_reach_ = 0;                    // every face outside the set is farther from anchor_
   std::vector<TriangleIndex> set_faces_;    // [candidate]
   std::vector<TriangleBlock8> set_blocks_;  // candidates' coordinates, 8 per block
+  std::vector<float> set_block_lower_;      // per block: its and later faces' least distance
   std::vector<std::pair<double, TriangleIndex>> gathered_;
   double pruned_lower_ = 0;  // depthFirst with reach > 0: a lower bound on what it did not gather
   bool has_last_ = false;
