@@ -15,4 +15,8 @@ using Triangle = std::array<VertexIndex, 3>;
 
 inline constexpr uint32_t kInvalidIndex = 0xffffffffu;
 
+// A float no smaller than x >= 0, without a branch: x is raised by more than rounding to float
+// can take off (2^-24 relative for normal floats, 2^-150 absolute below them).
+inline float floatAtLeast(double x) { return static_cast<float>(x * (1 + 0x1p-23) + 0x1p-148); }
+
 }  // namespace meshsweeper

@@ -15,10 +15,6 @@ namespace meshsweeper {
 
 namespace {
 
-// A float no smaller than x >= 0, without a branch: x is raised by more than float rounding
-// can take off (2^-24 relative for normal floats, 2^-150 absolute below them).
-inline float floatAtLeast(double x) { return static_cast<float>(x * (1 + 0x1p-23) + 0x1p-148); }
-
 // The largest |coordinate| of any used box (scaled units).
 double boxExtent(const std::vector<Node8>& nodes) {
   double extent = 0;
@@ -137,17 +133,30 @@ void DeformingBody::inflate(const std::vector<double>& delta) {
 DisplacementCheck DeformingBody::setPositions(const std::vector<Vec3>& positions) {
   checkSize(positions.size(), "positions");
   DisplacementCheck check;
-  double moved2 = 0;  // how far the farthest vertex moves: the lineage's drift grows by that
+  // A branch-free pass (the compiler vectorises it): non-finite positions, vertices that may be
+  // past their bound (a superset: squared, with a relative 1e-12 to spare), and how far the
+  // farthest vertex moves (the lineage's drift grows by that). NaN fails every comparison, so
+  // it is caught by `finite`.
+  bool finite = true, suspect = false;
+  double moved2 = 0;
   for (size_t v = 0; v < positions.size(); ++v) {
-    if (!positions[v].allFinite())
-      throw std::invalid_argument("DeformingBody: position " + std::to_string(v) + " is not finite");
-    const double excess = (positions[v] - anchor_positions_[v]).norm() - delta_[v];
-    if (excess > 0 && excess > check.excess) {
-      check.accepted = false;
-      check.excess = excess;
-      check.worst_vertex = static_cast<VertexIndex>(v);
-    }
+    const Vec3 d = positions[v] - anchor_positions_[v];
+    const double d2 = d.squaredNorm();
+    finite &= d2 <= std::numeric_limits<double>::max();
+    suspect |= d2 > delta_[v] * delta_[v] * (1 - 1e-12);
     moved2 = std::max(moved2, (positions[v] - positions_[v]).squaredNorm());
+  }
+  if (!finite || suspect) {
+    for (size_t v = 0; v < positions.size(); ++v) {
+      if (!positions[v].allFinite())
+        throw std::invalid_argument("DeformingBody: position " + std::to_string(v) + " is not finite");
+      const double excess = (positions[v] - anchor_positions_[v]).norm() - delta_[v];
+      if (excess > 0 && excess > check.excess) {
+        check.accepted = false;
+        check.excess = excess;
+        check.worst_vertex = static_cast<VertexIndex>(v);
+      }
+    }
   }
   if (!check.accepted) return check;
   positions_ = positions;

@@ -105,7 +105,7 @@ void KeyframeBody::interpolateBounds(double t) {
     for (int k = 0; k < 8; ++k) {
       const double from_a = na.eps[k] + s * delta[k];
       const double from_b = nb.eps[k] + (1 - s) * delta[k];
-      out.eps[k] = std::nextafter(static_cast<float>(std::min(from_a, from_b)), inf);
+      out.eps[k] = floatAtLeast(std::min(from_a, from_b));
     }
   }
   geometry_.version = nextGeometryVersion();
