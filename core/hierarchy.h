@@ -146,7 +146,9 @@ class Hierarchy {
 // if `radii` its eps (max distance of its subtree's vertices to its triangle, at these
 // positions) are rewritten.
 // positions: [vertex], as many as the mesh has. Boxes: one bottom-up pass; radii: exact, the
-// cost of the build's radius phase.
+// cost of the build's radius phase (a branch and bound that skips subtrees whose box lies within
+// the radius found so far: with `boxes` false, the boxes in `nodes` must already hold the
+// subtrees' vertices at these positions).
 void refitBounds(const Hierarchy& h, const Vec3* positions, std::vector<Node8>& nodes, bool radii,
                  bool boxes = true);
 

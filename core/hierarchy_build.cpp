@@ -18,6 +18,12 @@
 //     become leaf slots, packed first-fit into blocks of 8 faces (laid out depth-first).
 //   bounds: per slot, the float box of its subtree's vertices (rounded outward) and
 //     eps = max over its subtree's vertices of their distance to the slot's triangle.
+//
+// What keeps it fast (none of it changes the hierarchy built, bit for bit): vertices renumbered
+// in Morton order and triangle slots sorted by their first corner (memory locality); per round,
+// the stars of the round's start as CSR arrays for the proposals (no list walks, no neighbour
+// sorting); stable radix sorts; subtree boxes and face counts accumulated during the contraction
+// instead of a pass over the cover tree; eps found by branch and bound over the subtree's boxes.
 #include "core/hierarchy.h"
 #include "core/morton.h"
 
@@ -37,6 +43,7 @@ double secondsSince(Clock::time_point start) {
 }
 
 constexpr uint32_t kNone = kInvalidIndex;
+constexpr double kInfinity = std::numeric_limits<double>::infinity();
 constexpr uint32_t kLeafFaces = 8;
 constexpr uint32_t kSpatialFaces = 512;  // subtrees this small are split spatially into leaf blocks
 
@@ -54,11 +61,41 @@ struct Box {
 
 // The cover tree produced by contraction: raw nodes [0, faces) are the original faces, later ones
 // are triangles created by contractions (or synthetic nodes over the roots).
+// A node's subtree is final when it gets its parent (a deleted triangle adopts nothing, and
+// an adopter's old node is never reopened), so boxes and face counts are accumulated while the
+// contraction runs.
 struct CoverTree {
   std::vector<int32_t> parent;     // [raw node] -1 for a root
   std::vector<Triangle> corners;   // [raw node] the node's triangle (original vertex indices)
+  std::vector<Box> box;            // [raw node] box of the subtree's vertices
+  std::vector<uint32_t> faces;     // [raw node] original faces in the subtree
   std::vector<int32_t> roots;
 };
+
+// Sorts (keys[i], values[i]) by the low `bits` bits of the keys: a stable LSD radix sort, 11
+// bits per pass, so equal keys keep their order.
+void radixSort(std::vector<uint64_t>& keys, std::vector<uint32_t>& values, int bits) {
+  const size_t count = keys.size();
+  std::vector<uint64_t> key_temp(count);
+  std::vector<uint32_t> value_temp(count);
+  for (int shift = 0; shift < bits; shift += 11) {
+    uint32_t histogram[2048] = {};
+    for (size_t i = 0; i < count; ++i) ++histogram[(keys[i] >> shift) & 2047];
+    uint32_t sum = 0;
+    for (uint32_t& h : histogram) {
+      const uint32_t c = h;
+      h = sum;
+      sum += c;
+    }
+    for (size_t i = 0; i < count; ++i) {
+      const uint32_t slot = histogram[(keys[i] >> shift) & 2047]++;
+      key_temp[slot] = keys[i];
+      value_temp[slot] = values[i];
+    }
+    keys.swap(key_temp);
+    values.swap(value_temp);
+  }
+}
 
 // Phase 1: contraction rounds over a corner-list representation of the current mesh.
 class Contractor {
@@ -76,6 +113,7 @@ class Contractor {
   struct Deletion {
     uint32_t slot;
     uint32_t adopter;
+    VertexIndex third;  // the corner that is neither v nor u (u for a degenerate triangle)
   };
 
   bool holds(uint32_t slot, VertexIndex x) const {
@@ -105,215 +143,348 @@ class Contractor {
       c = following;
     }
   }
-  bool findDeletions(VertexIndex v, VertexIndex u, std::vector<Deletion>& deletions);
-  uint32_t findSurvivor(VertexIndex v, VertexIndex u, VertexIndex a);
-  void apply(VertexIndex v, VertexIndex u, const std::vector<Deletion>& deletions);
+  // star <- the live corners of v, in list order.
+  void gatherStar(VertexIndex v, std::vector<uint32_t>& star) {
+    star.clear();
+    forEachCorner(v, [&](uint32_t c) { star.push_back(c); });
+  }
+  template <class ForEachV, class ForEachU>
+  bool findDeletions(VertexIndex v, VertexIndex u, ForEachV&& for_each_v, ForEachU&& for_each_u,
+                     std::vector<Deletion>& deletions);
+  // v -> u on the current mesh, with v's star from gatherStar().
+  bool findDeletions(VertexIndex v, VertexIndex u, const std::vector<uint32_t>& v_star,
+                     std::vector<Deletion>& deletions) {
+    return findDeletions(
+        v, u, [&](auto&& f) { for (uint32_t c : v_star) f(c / 3); },
+        [&](auto&& f) { forEachCorner(u, [&](uint32_t c) { f(c / 3); }); }, deletions);
+  }
+  // Whether v -> u is legal on the mesh of the round's start (stars from buildStars()).
+  bool legalAtRoundStart(VertexIndex v, VertexIndex u) {
+    auto star = [&](VertexIndex x) {
+      return [this, x](auto&& f) {
+        for (uint32_t i = star_begin_[x]; i < star_begin_[x + 1]; ++i) f(star_slot_[i]);
+      };
+    };
+    return findDeletions(v, u, star(v), star(u), deletions_);
+  }
+  void buildStars();
+  void apply(VertexIndex v, VertexIndex u, const std::vector<uint32_t>& v_star,
+             const std::vector<Deletion>& deletions);
+  void release(uint32_t slot);
   void adopt(uint32_t adopter, uint32_t deleted);
   int32_t newNode(uint32_t slot) {
     tree_->parent.push_back(-1);
-    tree_->corners.push_back({tri_[3 * slot], tri_[3 * slot + 1], tri_[3 * slot + 2]});
+    tree_->corners.push_back(
+        {original_[tri_[3 * slot]], original_[tri_[3 * slot + 1]], original_[tri_[3 * slot + 2]]});
+    tree_->box.emplace_back();
+    tree_->faces.push_back(0);
     return static_cast<int32_t>(tree_->parent.size() - 1);
+  }
+
+  // A neighbour by squared distance, ties broken by original index.
+  struct Near {
+    double squared_distance = kInfinity;
+    VertexIndex vertex = kNone;
+  };
+  bool closer(const Near& a, const Near& b) const {
+    if (a.squared_distance != b.squared_distance) return a.squared_distance < b.squared_distance;
+    return b.vertex == kNone || (a.vertex != kNone && original_[a.vertex] < original_[b.vertex]);
   }
 
   const Mesh& mesh_;
   uint32_t base_triangles_;
   CoverTree* tree_ = nullptr;
+  // Vertices are renumbered (local ids, Morton order); every array below uses local ids.
+  std::vector<VertexIndex> original_;  // [vertex] original index
+  std::vector<Vec3> pos_;              // [vertex] position
+  std::vector<VertexIndex> into_;      // [vertex] the vertex it was contracted into
   std::vector<VertexIndex> tri_;    // [3 * slot + k] current corners of each triangle slot
   std::vector<uint8_t> alive_;      // [slot]
   std::vector<uint32_t> head_;      // [vertex] first corner of the vertex's corner list
   std::vector<uint32_t> next_;      // [corner] next corner of the same vertex
+  std::vector<uint32_t> live_corners_;  // [vertex] corners of live triangles at the vertex
   std::vector<double> radius_;      // [vertex] contraction radius r
   std::vector<int32_t> holder_;     // [slot] cover-tree node carrying the slot's faces
   std::vector<uint8_t> open_;       // [slot] holder_ was created since the corners last changed
-  std::vector<VertexIndex> neighbours_;                 // sorted by index
-  std::vector<std::pair<double, VertexIndex>> ranked_;  // (squared distance, neighbour)
+  std::vector<Box> slot_box_;       // [slot] box of holder_'s subtree
+  std::vector<uint32_t> slot_faces_;  // [slot] original faces in holder_'s subtree
+  std::vector<uint32_t> star_;             // live corners of the vertex at hand
+  std::vector<uint32_t> live_slots_;       // slots alive at the round's start, increasing
+  std::vector<uint32_t> star_begin_;       // [vertex + 1] CSR into star_slot_
+  std::vector<uint32_t> star_slot_;        // live triangles per vertex at the round's start
   std::vector<Deletion> deletions_;
   size_t live_triangles_ = 0;
 };
 
-// Lists the triangles v -> u deletes (those holding both) with their adopters. Returns false
-// when some deleted triangle (v, u, a) would leave edge (u, a) in no surviving triangle.
-bool Contractor::findDeletions(VertexIndex v, VertexIndex u, std::vector<Deletion>& deletions) {
+// Lists the triangles v -> u deletes (those holding both) with their adopters: for a deleted
+// (v, u, a), the first triangle in u's star that does not hold v and holds a, else the first in
+// v's star that does not hold u and holds a. Returns false when some deleted triangle leaves
+// edge (u, a) in no surviving triangle. for_each_v(f) / for_each_u(f) call f(slot) for the
+// live triangles of v / u, in list order.
+template <class ForEachV, class ForEachU>
+bool Contractor::findDeletions(VertexIndex v, VertexIndex u, ForEachV&& for_each_v, ForEachU&& for_each_u,
+                               std::vector<Deletion>& deletions) {
   deletions.clear();
-  forEachCorner(v, [&](uint32_t c) {
-    const uint32_t slot = c / 3;
+  for_each_v([&](uint32_t slot) {
     if (!holds(slot, u)) return;
-    for (const Deletion& d : deletions) if (d.slot == slot) return;
-    deletions.push_back({slot, kNone});
+    bool listed = false;
+    for (const Deletion& d : deletions) listed |= d.slot == slot;
+    if (!listed) deletions.push_back({slot, kNone, thirdVertex(slot, v, u)});
   });
-  for (Deletion& d : deletions) {
-    d.adopter = findSurvivor(v, u, thirdVertex(d.slot, v, u));
-    if (d.adopter == kNone) return false;
-  }
-  return true;
+  if (deletions.empty()) return true;
+  size_t missing = deletions.size();
+  auto adoptFrom = [&](uint32_t slot, VertexIndex other) {
+    if (holds(slot, other)) return;
+    for (Deletion& d : deletions) {
+      if (d.adopter == kNone && holds(slot, d.third)) {
+        d.adopter = slot;
+        --missing;
+      }
+    }
+  };
+  for_each_u([&](uint32_t slot) { if (missing > 0) adoptFrom(slot, v); });
+  if (missing > 0) for_each_v([&](uint32_t slot) { if (missing > 0) adoptFrom(slot, u); });
+  return missing == 0;
 }
 
-// A triangle that survives v -> u and holds a (after the contraction: holds u and a).
-uint32_t Contractor::findSurvivor(VertexIndex v, VertexIndex u, VertexIndex a) {
-  uint32_t found = kNone;
-  auto check = [&](VertexIndex other) {
-    return [&, other](uint32_t c) {
-      const uint32_t slot = c / 3;
-      if (found == kNone && !holds(slot, other) && holds(slot, a)) found = slot;
-    };
-  };
-  forEachCorner(u, check(v));
-  if (found == kNone) forEachCorner(v, check(u));
-  return found;
+// The box and face count of a slot's holder live in slot_box_ / slot_faces_ (next to the
+// slot's other data) while it is the holder; they are copied into the tree when it stops being
+// one. Faces (the initial holders) already have theirs.
+void Contractor::release(uint32_t slot) {
+  const int32_t node = holder_[slot];
+  if (static_cast<size_t>(node) < mesh_.triangles.size()) return;
+  tree_->box[node] = slot_box_[slot];
+  tree_->faces[node] = slot_faces_[slot];
 }
 
 void Contractor::adopt(uint32_t adopter, uint32_t deleted) {
   const int32_t child = holder_[deleted];
-  if (open_[adopter]) {
-    tree_->parent[child] = holder_[adopter];
-    return;
+  release(deleted);
+  if (!open_[adopter]) {
+    const int32_t node = newNode(adopter);
+    release(adopter);
+    tree_->parent[holder_[adopter]] = node;
+    holder_[adopter] = node;
+    open_[adopter] = 1;
   }
-  const int32_t node = newNode(adopter);
-  tree_->parent[holder_[adopter]] = node;
-  tree_->parent[child] = node;
-  holder_[adopter] = node;
-  open_[adopter] = 1;
+  tree_->parent[child] = holder_[adopter];
+  slot_box_[adopter].add(slot_box_[deleted]);
+  slot_faces_[adopter] += slot_faces_[deleted];
 }
 
-void Contractor::apply(VertexIndex v, VertexIndex u, const std::vector<Deletion>& deletions) {
+void Contractor::apply(VertexIndex v, VertexIndex u, const std::vector<uint32_t>& v_star,
+                       const std::vector<Deletion>& deletions) {
   for (const Deletion& d : deletions) {
     alive_[d.slot] = 0;
     --live_triangles_;
+    for (int k = 0; k < 3; ++k) --live_corners_[tri_[3 * d.slot + k]];
   }
-  uint32_t tail = kNone;
-  forEachCorner(v, [&](uint32_t c) {
+  live_corners_[u] += live_corners_[v];
+  live_corners_[v] = 0;
+  // v's surviving corners become u's, spliced in front of u's list.
+  uint32_t first = kNone, tail = kNone;
+  for (uint32_t c : v_star) {
+    if (!alive_[c / 3]) continue;
     tri_[c] = u;
     open_[c / 3] = 0;
+    if (tail == kNone) first = c; else next_[tail] = c;
     tail = c;
-  });
+  }
   if (tail != kNone) {
     next_[tail] = head_[u];
-    head_[u] = head_[v];
+    head_[u] = first;
   }
   head_[v] = kNone;
   for (const Deletion& d : deletions) adopt(d.adopter, d.slot);
-  radius_[u] = std::max(radius_[u], radius_[v] + (mesh_.positions[u] - mesh_.positions[v]).norm());
+  radius_[u] = std::max(radius_[u], radius_[v] + (pos_[u] - pos_[v]).norm());
+}
+
+// The stars of the round's start as CSR arrays (the proposals read them; contractions applied
+// later in the round walk the corner lists).
+void Contractor::buildStars() {
+  size_t kept = 0;
+  for (uint32_t slot : live_slots_)
+    if (alive_[slot]) live_slots_[kept++] = slot;
+  live_slots_.resize(kept);
+  star_begin_.assign(head_.size() + 2, 0);
+  for (uint32_t slot : live_slots_)
+    for (int k = 0; k < 3; ++k) ++star_begin_[tri_[3 * slot + k] + 2];
+  for (size_t v = 2; v < star_begin_.size(); ++v) star_begin_[v] += star_begin_[v - 1];
+  star_slot_.resize(3 * live_slots_.size());
+  for (uint32_t slot : live_slots_)
+    for (uint32_t c = 3 * slot; c < 3 * slot + 3; ++c) star_slot_[star_begin_[tri_[c] + 1]++] = slot;
+  star_begin_.pop_back();  // star_begin_[v] .. star_begin_[v + 1] now spans v's triangles
 }
 
 void Contractor::run(CoverTree& tree, std::vector<VertexIndex>& contracted_into,
                      HierarchyStats& stats) {
   tree_ = &tree;
-  const size_t n = mesh_.positions.size();
   const size_t m = mesh_.triangles.size();
+
+  // Vertices used by some triangle, renumbered in Morton order (the order of contractions across
+  // gaps): local ids keep neighbours close in memory. Ties between equal distances are still
+  // broken by original index, so the result does not depend on the renumbering.
+  {
+    std::vector<uint8_t> used(mesh_.positions.size(), 0);
+    for (const Triangle& t : mesh_.triangles)
+      for (VertexIndex v : t) used[v] = 1;
+    Box bounds;
+    original_.clear();
+    for (size_t v = 0; v < used.size(); ++v) {
+      if (!used[v]) continue;
+      original_.push_back(static_cast<VertexIndex>(v));
+      bounds.add(mesh_.positions[v]);
+    }
+    const Vec3 extent = (bounds.upper - bounds.lower).cwiseMax(1e-300);
+    std::vector<uint64_t> code(original_.size());
+    for (size_t i = 0; i < original_.size(); ++i)
+      code[i] = mortonCode(mesh_.positions[original_[i]], bounds.lower, extent);
+    radixSort(code, original_, 63);  // ties by original index
+  }
+  const size_t n = original_.size();
+  std::vector<VertexIndex> local(mesh_.positions.size(), kNone);  // [original vertex]
+  pos_.resize(n);
+  for (size_t i = 0; i < n; ++i) {
+    local[original_[i]] = static_cast<VertexIndex>(i);
+    pos_[i] = mesh_.positions[original_[i]];
+  }
+
+  // Triangle slots renumbered by their first corner in Morton order (counting sort), for the
+  // same reason. Corner lists are still built in original face order, so every walk of a list
+  // visits triangles in the same order whatever the numbering.
+  std::vector<uint32_t> slot_of(m);  // [original face] slot
+  {
+    std::vector<uint32_t> start(n + 1, 0);
+    auto key = [&](size_t t) {
+      const Triangle& f = mesh_.triangles[t];
+      return std::min({local[f[0]], local[f[1]], local[f[2]]});
+    };
+    for (size_t t = 0; t < m; ++t) ++start[key(t) + 1];
+    for (size_t i = 1; i <= n; ++i) start[i] += start[i - 1];
+    for (size_t t = 0; t < m; ++t) slot_of[t] = start[key(t)]++;
+  }
+
   tri_.resize(3 * m);
   alive_.assign(m, 1);
   head_.assign(n, kNone);
   next_.assign(3 * m, kNone);
+  live_corners_.assign(n, 0);
   radius_.assign(n, 0.0);
   holder_.resize(m);
   open_.assign(m, 0);
+  into_.assign(n, kNone);
+  // Each node a contraction creates replaces a deleted triangle's: at most m of them.
+  tree.parent.reserve(2 * m);
+  tree.corners.reserve(2 * m);
+  tree.box.reserve(2 * m);
+  tree.faces.reserve(2 * m);
   tree.parent.assign(m, -1);
   tree.corners.assign(mesh_.triangles.begin(), mesh_.triangles.end());
-  contracted_into.assign(n, kNone);
+  tree.box.resize(m);
+  tree.faces.assign(m, 1);
+  slot_box_.resize(m);
+  slot_faces_.assign(m, 1);
+  for (size_t t = 0; t < m; ++t) {
+    for (VertexIndex v : mesh_.triangles[t]) tree.box[t].add(mesh_.positions[v]);
+    slot_box_[slot_of[t]] = tree.box[t];
+  }
   live_triangles_ = m;
+  live_slots_.resize(m);
+  std::iota(live_slots_.begin(), live_slots_.end(), 0u);
   for (size_t t = m; t-- > 0;) {
-    holder_[t] = static_cast<int32_t>(t);
+    const uint32_t slot = slot_of[t];
+    holder_[slot] = static_cast<int32_t>(t);
     for (int k = 0; k < 3; ++k) {
-      const uint32_t c = static_cast<uint32_t>(3 * t + k);
-      tri_[c] = mesh_.triangles[t][k];
+      const uint32_t c = 3 * slot + k;
+      tri_[c] = local[mesh_.triangles[t][k]];
       next_[c] = head_[tri_[c]];
       head_[tri_[c]] = c;
+      ++live_corners_[tri_[c]];
     }
   }
-
-  // Vertices used by some triangle, in Morton order (for contractions across gaps).
-  Box bounds;
-  std::vector<VertexIndex> active;
-  for (size_t v = 0; v < n; ++v) {
-    if (head_[v] != kNone) {
-      active.push_back(static_cast<VertexIndex>(v));
-      bounds.add(mesh_.positions[v]);
-    }
-  }
-  {
-    const Vec3 extent = (bounds.upper - bounds.lower).cwiseMax(1e-300);
-    std::vector<uint64_t> code(n, 0);
-    for (VertexIndex v : active) {
-      code[v] = mortonCode(mesh_.positions[v], bounds.lower, extent);
-    }
-    std::sort(active.begin(), active.end(), [&](VertexIndex a, VertexIndex b) {
-      return code[a] != code[b] ? code[a] < code[b] : a < b;
-    });
-  }
+  std::vector<VertexIndex> active(n);  // live vertices, in Morton order
+  std::iota(active.begin(), active.end(), 0u);
 
   std::vector<Candidate> candidates;
-  std::vector<uint64_t> order;
+  std::vector<uint64_t> keys;
+  std::vector<uint32_t> order;
   std::vector<uint8_t> locked(n, 0);  // [vertex] contracted or grown this round: not a source
   const uint32_t kMaxRounds = 10000;
   while (live_triangles_ > base_triangles_ && stats.rounds < kMaxRounds) {
     ++stats.rounds;
     // Drop vertices that no live triangle uses any more (keeps Morton order).
     size_t kept = 0;
-    for (VertexIndex v : active) {
-      bool used = false;
-      forEachCorner(v, [&](uint32_t) { used = true; });
-      if (used) active[kept++] = v;
-    }
+    for (VertexIndex v : active)
+      if (live_corners_[v] > 0) active[kept++] = v;
     active.resize(kept);
     if (active.size() < 2) break;
+    buildStars();
 
     candidates.clear();
     for (size_t i = 0; i < active.size(); ++i) {
       const VertexIndex v = active[i];
-      const Vec3& pv = mesh_.positions[v];
-      neighbours_.clear();
-      forEachCorner(v, [&](uint32_t c) {
+      const Vec3& pv = pos_[v];
+      // The two nearest distinct neighbours of v by (squared distance, original index).
+      const uint32_t* star = &star_slot_[star_begin_[v]];
+      const size_t star_count = star_begin_[v + 1] - star_begin_[v];
+      Near nearest[2];
+      for (size_t j = 0; j < star_count; ++j) {
+        const VertexIndex* t = &tri_[3 * star[j]];
         for (int k = 0; k < 3; ++k) {
-          const VertexIndex x = tri_[3 * (c / 3) + k];
-          if (x != v) neighbours_.push_back(x);
+          const VertexIndex x = t[k];
+          if (x == v || x == nearest[0].vertex || x == nearest[1].vertex) continue;
+          const Near key{(pos_[x] - pv).squaredNorm(), x};
+          if (closer(key, nearest[0])) { nearest[1] = nearest[0]; nearest[0] = key; }
+          else if (closer(key, nearest[1])) nearest[1] = key;
         }
-      });
-      std::sort(neighbours_.begin(), neighbours_.end());
-      neighbours_.erase(std::unique(neighbours_.begin(), neighbours_.end()), neighbours_.end());
-      ranked_.clear();
-      for (VertexIndex u : neighbours_) ranked_.emplace_back((mesh_.positions[u] - pv).squaredNorm(), u);
-      std::sort(ranked_.begin(), ranked_.end());
+      }
       VertexIndex target = kNone;
-      for (size_t j = 0; j < ranked_.size() && j < 2; ++j) {
-        if (findDeletions(v, ranked_[j].second, deletions_)) {
-          target = ranked_[j].second;
+      for (const Near& near : nearest) {
+        const VertexIndex x = near.vertex;
+        if (x != kNone && legalAtRoundStart(v, x)) {
+          target = x;
           break;
         }
       }
       if (target == kNone) {
         // No legal edge contraction: the nearest Morton-order vertex not sharing a triangle.
-        double best = std::numeric_limits<double>::infinity();
+        double best = kInfinity;
         for (size_t j = (i >= 2 ? i - 2 : 0); j <= i + 2 && j < active.size(); ++j) {
           const VertexIndex w = active[j];
-          if (w == v || std::binary_search(neighbours_.begin(), neighbours_.end(), w)) continue;
-          const double d = (mesh_.positions[w] - pv).squaredNorm();
+          bool shares = w == v;
+          for (size_t k = 0; k < star_count && !shares; ++k) shares = holds(star[k], w);
+          if (shares) continue;
+          const double d = (pos_[w] - pv).squaredNorm();
           if (d < best) { best = d; target = w; }
         }
       }
       if (target != kNone)
-        candidates.push_back({radius_[v] + (mesh_.positions[target] - pv).norm(), v, target});
+        candidates.push_back({radius_[v] + (pos_[target] - pv).norm(), v, target});
     }
-    // Cheapest first: costs are >= 0, so their float bits order like the costs (ties by index).
+    // Cheapest first: costs are >= 0, so their float bits order like the costs; the radix sort
+    // is stable, so ties stay in candidate order.
+    keys.resize(candidates.size());
     order.resize(candidates.size());
     for (size_t i = 0; i < candidates.size(); ++i) {
       const float cost = static_cast<float>(candidates[i].cost);
       uint32_t bits;
       std::memcpy(&bits, &cost, sizeof(bits));
-      order[i] = static_cast<uint64_t>(bits) << 32 | i;
+      keys[i] = bits;
+      order[i] = static_cast<uint32_t>(i);
     }
-    std::sort(order.begin(), order.end());
+    radixSort(keys, order, 32);
 
     uint32_t applied = 0;
-    for (uint64_t key : order) {
-      const Candidate& cand = candidates[static_cast<uint32_t>(key)];
+    for (uint32_t index : order) {
+      const Candidate& cand = candidates[index];
       if (live_triangles_ <= base_triangles_) break;
-      if (locked[cand.v] || contracted_into[cand.u] != kNone || contracted_into[cand.v] != kNone)
-        continue;
-      if (!findDeletions(cand.v, cand.u, deletions_)) continue;
+      if (locked[cand.v] || into_[cand.u] != kNone || into_[cand.v] != kNone) continue;
+      gatherStar(cand.v, star_);
+      if (!findDeletions(cand.v, cand.u, star_, deletions_)) continue;
       locked[cand.v] = 1;
       locked[cand.u] = 1;
-      contracted_into[cand.v] = cand.u;
-      apply(cand.v, cand.u, deletions_);
+      into_[cand.v] = cand.u;
+      apply(cand.v, cand.u, star_, deletions_);
       ++applied;
     }
     stats.contractions += applied;
@@ -322,8 +493,13 @@ void Contractor::run(CoverTree& tree, std::vector<VertexIndex>& contracted_into,
     // Contracted vertices leave the active list at the next filtering (their lists are empty).
   }
   for (size_t t = 0; t < m; ++t) {
-    if (alive_[t]) tree.roots.push_back(holder_[t]);
+    if (!alive_[slot_of[t]]) continue;
+    release(slot_of[t]);
+    tree.roots.push_back(holder_[slot_of[t]]);
   }
+  contracted_into.assign(mesh_.positions.size(), kNone);
+  for (size_t v = 0; v < n; ++v)
+    if (into_[v] != kNone) contracted_into[original_[v]] = original_[into_[v]];
   stats.base_triangles = static_cast<uint32_t>(live_triangles_);
 }
 
@@ -337,27 +513,30 @@ class HierarchyBuilder {
 
  private:
   void buildChildLists();
-  void boundRawNodes();
   int32_t buildTop(std::vector<int32_t>::iterator first, std::vector<int32_t>::iterator last);
   void collapse();
-  void collectFaces(int32_t raw, std::vector<TriangleIndex>& faces) const;
-  void spatialNode(std::vector<TriangleIndex>& faces, int32_t node);
+  void collectFaces(int32_t raw, std::vector<TriangleIndex>& faces);
+  // A face and the sum of its corners (3x its centroid), kept together for the median splits.
+  struct FaceItem {
+    Vec3 centroid;
+    TriangleIndex face;
+  };
+  void spatialNode(FaceItem* first, FaceItem* last, int32_t node);
   template <class Emit>
-  void splitFaces(std::vector<TriangleIndex>::iterator first, std::vector<TriangleIndex>::iterator last,
-                  size_t group, Emit&& emit) const;
-  uint32_t addLeafBlock(const std::vector<TriangleIndex>& faces);
+  void splitFaces(FaceItem* first, FaceItem* last, size_t group, Emit&& emit) const;
+  uint32_t addLeafBlock(const TriangleIndex* faces, size_t count);
   void setSlot(Node8& node, int k, ChildRef child, const Triangle& corners, const Box& box) const;
   void computeRadii();
 
   const Mesh& mesh_;
   Hierarchy& h_;
   CoverTree tree_;
-  std::vector<Box> raw_box_;          // [raw node] box of the subtree's vertices
-  std::vector<uint32_t> raw_faces_;   // [raw node] original faces in the subtree
   std::vector<uint32_t> child_begin_; // [raw node + 1] CSR into child_list_
   std::vector<int32_t> child_list_;
   Node8 empty_;                       // a node with eight empty slots
   std::vector<Vec3> centroid_;        // [face] sum of its corners (3x the centroid)
+  std::vector<int32_t> collect_stack_;  // collectFaces()' stack
+  std::vector<FaceItem> items_;         // the faces spatialNode() regroups
 };
 
 void HierarchyBuilder::buildChildLists() {
@@ -372,69 +551,39 @@ void HierarchyBuilder::buildChildLists() {
     if (tree_.parent[id] >= 0) child_list_[fill[tree_.parent[id]]++] = static_cast<int32_t>(id);
 }
 
-// Boxes and face counts of every cover-tree node, children before parents (post-order from
-// the roots: an adopter's open node can be older than the nodes it adopts later).
-void HierarchyBuilder::boundRawNodes() {
-  const int32_t m = static_cast<int32_t>(mesh_.triangles.size());
-  const size_t raw = tree_.parent.size();
-  buildChildLists();
-  raw_box_.assign(raw, Box());
-  raw_faces_.assign(raw, 0);
-  std::vector<std::pair<int32_t, bool>> stack;
-  for (int32_t root : tree_.roots) {
-    stack.emplace_back(root, false);
-    while (!stack.empty()) {
-      auto [x, expanded] = stack.back();
-      stack.pop_back();
-      if (!expanded) {
-        stack.emplace_back(x, true);
-        for (uint32_t i = child_begin_[x]; i < child_begin_[x + 1]; ++i) stack.emplace_back(child_list_[i], false);
-        continue;
-      }
-      if (x < m) {
-        for (VertexIndex v : mesh_.triangles[x]) raw_box_[x].add(mesh_.positions[v]);
-        raw_faces_[x] = 1;
-      }
-      for (uint32_t i = child_begin_[x]; i < child_begin_[x + 1]; ++i) {
-        raw_box_[x].add(raw_box_[child_list_[i]]);
-        raw_faces_[x] += raw_faces_[child_list_[i]];
-      }
-    }
-  }
-}
-
 // A median-split binary tree over the roots; synthetic nodes take the triangle of their
 // larger child (any triangle is valid: its radius is computed from its subtree).
 int32_t HierarchyBuilder::buildTop(std::vector<int32_t>::iterator first,
                                    std::vector<int32_t>::iterator last) {
   if (last - first == 1) return *first;
   Box centers;
-  for (auto it = first; it != last; ++it) centers.add(raw_box_[*it].center());
+  for (auto it = first; it != last; ++it) centers.add(tree_.box[*it].center());
   int axis = 0;
   const Vec3 extent = centers.upper - centers.lower;
   if (extent.y() > extent[axis]) axis = 1;
   if (extent.z() > extent[axis]) axis = 2;
   auto middle = first + (last - first) / 2;
   std::nth_element(first, middle, last, [&](int32_t a, int32_t b) {
-    return raw_box_[a].center()[axis] < raw_box_[b].center()[axis];
+    return tree_.box[a].center()[axis] < tree_.box[b].center()[axis];
   });
   const int32_t left = buildTop(first, middle);
   const int32_t right = buildTop(middle, last);
   const int32_t node = static_cast<int32_t>(tree_.parent.size());
   tree_.parent.push_back(-1);
-  tree_.corners.push_back(tree_.corners[raw_faces_[left] >= raw_faces_[right] ? left : right]);
+  tree_.corners.push_back(tree_.corners[tree_.faces[left] >= tree_.faces[right] ? left : right]);
   tree_.parent[left] = node;
   tree_.parent[right] = node;
-  Box box = raw_box_[left];
-  box.add(raw_box_[right]);
-  raw_box_.push_back(box);
-  raw_faces_.push_back(raw_faces_[left] + raw_faces_[right]);
+  Box box = tree_.box[left];
+  box.add(tree_.box[right]);
+  tree_.box.push_back(box);
+  tree_.faces.push_back(tree_.faces[left] + tree_.faces[right]);
   return node;
 }
 
-void HierarchyBuilder::collectFaces(int32_t raw, std::vector<TriangleIndex>& faces) const {
+void HierarchyBuilder::collectFaces(int32_t raw, std::vector<TriangleIndex>& faces) {
   const int32_t m = static_cast<int32_t>(mesh_.triangles.size());
-  std::vector<int32_t> stack{raw};
+  std::vector<int32_t>& stack = collect_stack_;
+  stack.assign(1, raw);
   while (!stack.empty()) {
     const int32_t x = stack.back();
     stack.pop_back();
@@ -443,23 +592,30 @@ void HierarchyBuilder::collectFaces(int32_t raw, std::vector<TriangleIndex>& fac
   }
 }
 
-// Fills `node` with the faces of a small subtree re-grouped by median splits: groups of at
-// most 8 faces become leaf blocks, larger groups child nodes (depth-first, like collapse()).
-// Any grouping of whole faces is a valid cover; contraction groups are spatially looser.
-void HierarchyBuilder::spatialNode(std::vector<TriangleIndex>& faces, int32_t node) {
+// Fills `node` with the faces [first, last) of a small subtree re-grouped by median splits
+// (in place): groups of at most 8 faces become leaf blocks, larger groups child nodes
+// (depth-first, like collapse()). Any grouping of whole faces is a valid cover; contraction
+// groups are spatially looser.
+void HierarchyBuilder::spatialNode(FaceItem* first, FaceItem* last, int32_t node) {
+  const size_t count = static_cast<size_t>(last - first);
   size_t group = kLeafFaces;
-  while (group * 8 < faces.size()) group *= 8;
-  std::vector<std::vector<TriangleIndex>> groups;
-  splitFaces(faces.begin(), faces.end(), group, [&](auto first, auto last) { groups.emplace_back(first, last); });
+  while (group * 8 < count) group *= 8;
+  // At most 8 groups: count <= 8 * group and every group but the last is full.
+  std::pair<FaceItem*, FaceItem*> groups[8];
+  int group_count = 0;
+  splitFaces(first, last, group, [&](FaceItem* begin, FaceItem* end) { groups[group_count++] = {begin, end}; });
   int k = 0;
-  std::vector<std::pair<int32_t, size_t>> children;  // (node, group)
-  for (size_t i = 0; i < groups.size(); ++i) {
+  std::pair<int32_t, int> children[8];  // (node, group)
+  int child_count = 0;
+  for (int i = 0; i < group_count; ++i) {
+    const auto [begin, end] = groups[i];
     Box box;
-    for (TriangleIndex f : groups[i])
-      for (VertexIndex v : mesh_.triangles[f]) box.add(mesh_.positions[v]);
-    const Triangle& corners = mesh_.triangles[groups[i].front()];
-    if (groups[i].size() <= kLeafFaces) {
-      const uint32_t leaf = addLeafBlock(groups[i]);
+    for (const FaceItem* f = begin; f != end; ++f) box.add(tree_.box[f->face]);
+    const Triangle& corners = mesh_.triangles[begin->face];
+    if (static_cast<size_t>(end - begin) <= kLeafFaces) {
+      TriangleIndex faces[kLeafFaces];
+      for (const FaceItem* f = begin; f != end; ++f) faces[f - begin] = f->face;
+      const uint32_t leaf = addLeafBlock(faces, static_cast<size_t>(end - begin));
       setSlot(h_.nodes_[node], k++, leafRef(static_cast<int32_t>(leaf)), corners, box);
       continue;
     }
@@ -468,46 +624,45 @@ void HierarchyBuilder::spatialNode(std::vector<TriangleIndex>& faces, int32_t no
     h_.parent_.push_back(node);
     h_.leaf_begin_.push_back(0);
     setSlot(h_.nodes_[node], k++, child, corners, box);
-    children.emplace_back(child, i);
+    children[child_count++] = {child, i};
   }
-  for (auto& [child, i] : children) {
+  for (int j = 0; j < child_count; ++j) {
+    const auto [child, i] = children[j];
     h_.leaf_begin_[child] = static_cast<uint32_t>(h_.leaf_blocks_.size());
-    spatialNode(groups[i], child);
+    spatialNode(groups[i].first, groups[i].second, child);
   }
 }
 
 // Splits faces at the median of their centroids along the widest axis into groups of at most
 // `group` faces, the left part a multiple of `group` so that groups are full; emits them in order.
 template <class Emit>
-void HierarchyBuilder::splitFaces(std::vector<TriangleIndex>::iterator first,
-                                  std::vector<TriangleIndex>::iterator last, size_t group, Emit&& emit) const {
+void HierarchyBuilder::splitFaces(FaceItem* first, FaceItem* last, size_t group, Emit&& emit) const {
   const size_t count = static_cast<size_t>(last - first);
   if (count <= group) {
     emit(first, last);
     return;
   }
-  auto centroid = [&](TriangleIndex f) -> const Vec3& { return centroid_[f]; };
   Box bounds;
-  for (auto it = first; it != last; ++it) bounds.add(centroid(*it));
+  for (const FaceItem* it = first; it != last; ++it) bounds.add(it->centroid);
   int axis = 0;
   const Vec3 extent = bounds.upper - bounds.lower;
   if (extent.y() > extent[axis]) axis = 1;
   if (extent.z() > extent[axis]) axis = 2;
   const size_t blocks = (count + group - 1) / group;
-  auto middle = first + static_cast<std::ptrdiff_t>(group * ((blocks + 1) / 2));
-  std::nth_element(first, middle, last, [&](TriangleIndex a, TriangleIndex b) {
-    const double ca = centroid(a)[axis], cb = centroid(b)[axis];
-    return ca != cb ? ca < cb : a < b;
+  FaceItem* middle = first + group * ((blocks + 1) / 2);
+  std::nth_element(first, middle, last, [axis](const FaceItem& a, const FaceItem& b) {
+    const double ca = a.centroid[axis], cb = b.centroid[axis];
+    return ca != cb ? ca < cb : a.face < b.face;
   });
   splitFaces(first, middle, group, emit);
   splitFaces(middle, last, group, emit);
 }
 
-uint32_t HierarchyBuilder::addLeafBlock(const std::vector<TriangleIndex>& faces) {
+uint32_t HierarchyBuilder::addLeafBlock(const TriangleIndex* faces, size_t count) {
   const uint32_t leaf = static_cast<uint32_t>(h_.leaf_blocks_.size());
   TriangleBlock8& block = h_.leaf_blocks_.emplace_back();
   for (uint32_t lane = 0; lane < 8; ++lane) {
-    const bool used = lane < faces.size();
+    const bool used = lane < count;
     const TriangleIndex f = faces[used ? lane : 0];
     for (int k = 0; k < 3; ++k) {
       const Vec3& x = mesh_.positions[mesh_.triangles[f][k]];
@@ -515,7 +670,7 @@ uint32_t HierarchyBuilder::addLeafBlock(const std::vector<TriangleIndex>& faces)
     }
     h_.leaf_triangles_.push_back(used ? f : kInvalidIndex);
   }
-  h_.leaf_lanes_.push_back(static_cast<uint8_t>(faces.size()));
+  h_.leaf_lanes_.push_back(static_cast<uint8_t>(count));
   return leaf;
 }
 
@@ -562,10 +717,10 @@ void HierarchyBuilder::collapse() {
   h_.leaf_begin_.assign(1, 0);
 
   std::vector<TriangleIndex> faces;
-  if (raw_faces_[top] <= kLeafFaces) {
+  if (tree_.faces[top] <= kLeafFaces) {
     collectFaces(top, faces);
-    setSlot(h_.nodes_[0], 0, leafRef(static_cast<int32_t>(addLeafBlock(faces))),
-            tree_.corners[top], raw_box_[top]);
+    setSlot(h_.nodes_[0], 0, leafRef(static_cast<int32_t>(addLeafBlock(faces.data(), faces.size()))),
+            tree_.corners[top], tree_.box[top]);
     return;
   }
   struct Bin {
@@ -579,10 +734,12 @@ void HierarchyBuilder::collapse() {
     const auto [x, node] = stack.back();
     stack.pop_back();
     h_.leaf_begin_[node] = static_cast<uint32_t>(h_.leaf_blocks_.size());
-    if (raw_faces_[x] <= kSpatialFaces) {
+    if (tree_.faces[x] <= kSpatialFaces) {
       faces.clear();
       collectFaces(x, faces);
-      spatialNode(faces, node);
+      items_.resize(faces.size());
+      for (size_t i = 0; i < faces.size(); ++i) items_[i] = {centroid_[faces[i]], faces[i]};
+      spatialNode(items_.data(), items_.data() + items_.size(), node);
       continue;
     }
     slots.assign(child_list_.begin() + child_begin_[x], child_list_.begin() + child_begin_[x + 1]);
@@ -593,14 +750,14 @@ void HierarchyBuilder::collapse() {
       inner.clear();
       bins.clear();
       std::sort(list.begin(), list.end(), [&](int32_t a, int32_t b) {
-        return raw_faces_[a] != raw_faces_[b] ? raw_faces_[a] > raw_faces_[b] : a < b;
+        return tree_.faces[a] != tree_.faces[b] ? tree_.faces[a] > tree_.faces[b] : a < b;
       });
       for (int32_t c : list) {
-        if (raw_faces_[c] > kLeafFaces) { inner.push_back(c); continue; }
+        if (tree_.faces[c] > kLeafFaces) { inner.push_back(c); continue; }
         Bin* fit = nullptr;
-        for (Bin& bin : bins) if (bin.faces + raw_faces_[c] <= kLeafFaces) { fit = &bin; break; }
+        for (Bin& bin : bins) if (bin.faces + tree_.faces[c] <= kLeafFaces) { fit = &bin; break; }
         if (!fit) fit = &bins.emplace_back();
-        fit->faces += raw_faces_[c];
+        fit->faces += tree_.faces[c];
         fit->members.push_back(c);
       }
       return inner.size() + bins.size();
@@ -612,7 +769,7 @@ void HierarchyBuilder::collapse() {
       double best_area = -1;
       for (int32_t c : inner) {
         if (std::find(blocked.begin(), blocked.end(), c) != blocked.end()) continue;
-        if (raw_box_[c].area() > best_area) { best_area = raw_box_[c].area(); best = c; }
+        if (tree_.box[c].area() > best_area) { best_area = tree_.box[c].area(); best = c; }
       }
       if (best < 0) break;
       trial = slots;
@@ -631,9 +788,9 @@ void HierarchyBuilder::collapse() {
       Box box;
       for (int32_t c : bin.members) {
         collectFaces(c, faces);
-        box.add(raw_box_[c]);
+        box.add(tree_.box[c]);
       }
-      const uint32_t leaf = addLeafBlock(faces);
+      const uint32_t leaf = addLeafBlock(faces.data(), faces.size());
       setSlot(h_.nodes_[node], k++, leafRef(static_cast<int32_t>(leaf)),
               tree_.corners[bin.members.front()], box);
     }
@@ -642,7 +799,7 @@ void HierarchyBuilder::collapse() {
       h_.nodes_.push_back(empty);
       h_.parent_.push_back(node);
       h_.leaf_begin_.push_back(0);
-      setSlot(h_.nodes_[node], k++, child, tree_.corners[c], raw_box_[c]);
+      setSlot(h_.nodes_[node], k++, child, tree_.corners[c], tree_.box[c]);
       stack.emplace_back(c, child);
     }
   }
@@ -673,9 +830,9 @@ void HierarchyBuilder::run(const BuildOptions& options) {
   stats.contract_seconds = secondsSince(start);
 
   const auto tree_start = Clock::now();
-  boundRawNodes();
+  buildChildLists();
   Box bounds;
-  for (int32_t r : tree_.roots) bounds.add(raw_box_[r]);
+  for (int32_t r : tree_.roots) bounds.add(tree_.box[r]);
   h_.center_ = bounds.center();
   const double half = 0.5 * (bounds.upper - bounds.lower).maxCoeff();
   h_.box_scale_ = half > 0 ? std::ldexp(1.0, -std::ilogb(half) - 1) : 1.0;

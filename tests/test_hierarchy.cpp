@@ -667,3 +667,46 @@ TEST_CASE("hierarchy: shared read-only by two threads", "[hierarchy][threads]") 
     CHECK(differ == 0);
   }
 }
+
+TEST_CASE("hierarchy: refitted radii are the exact maxima over each subtree", "[hierarchy]") {
+  // refitBounds skips subtrees whose box cannot raise a slot's radius (branch and bound); the
+  // result must equal the plain maximum over every subtree vertex, bit for bit, at the rest
+  // positions (the build's radii) and at moved ones.
+  std::vector<Mesh> meshes = {scenes::torus(1.0, 0.3, 48, 24), scenes::randomSoup(2000, 77),
+                              scenes::concatenate({scenes::icosphere(3), scenes::gridPlane(12)})};
+  if (const Mesh* holes = realMesh("holes")) meshes.push_back(*holes);
+  for (const Mesh& mesh : meshes) {
+    INFO(mesh.name);
+    const auto h = Hierarchy::build(mesh);
+    Random random(5);
+    std::vector<Vec3> moved = mesh.positions;
+    for (Vec3& x : moved) x += 0.05 * Vec3(random.uniform(-1, 1), random.uniform(-1, 1), random.uniform(-1, 1));
+    const std::vector<Vec3>* position_sets[] = {&mesh.positions, &moved};
+    for (const std::vector<Vec3>* positions : position_sets) {
+      std::vector<Node8> nodes = h->nodes();
+      refitBounds(*h, positions->data(), nodes, true);
+      CHECK(validateGeometry(*h, TreeGeometry{nodes.data(), nullptr, positions->data(), h->center(),
+                                              h->boxScale(), 1}) == "");
+      size_t differ = 0;
+      for (size_t node = 0; node < nodes.size(); ++node) {
+        for (int k = 0; k < 8; ++k) {
+          if (nodes[node].child[k] == kEmptyChild) continue;
+          const Vec3& a = (*positions)[nodes[node].corner[0][k]];
+          const Vec3& b = (*positions)[nodes[node].corner[1][k]];
+          const Vec3& c = (*positions)[nodes[node].corner[2][k]];
+          double worst = 0;
+          for (TriangleIndex f : slotFaces(*h, static_cast<int32_t>(node), k))
+            for (VertexIndex v : mesh.triangles[f])
+              worst = std::max(worst, squaredDistanceToTriangle((*positions)[v], a, b, c));
+          const float expected = std::nextafter(static_cast<float>(std::sqrt(worst) * (1 + 1e-9)),
+                                                std::numeric_limits<float>::infinity());
+          const bool rest_differs = positions == &mesh.positions && nodes[node].eps[k] != h->nodes()[node].eps[k];
+          if ((nodes[node].eps[k] != expected || rest_differs) && ++differ <= 5)
+            FAIL_CHECK("node " << node << " slot " << k << ": eps " << nodes[node].eps[k] << ", exhaustive "
+                               << expected << ", built " << h->nodes()[node].eps[k]);
+        }
+      }
+      CHECK(differ == 0);
+    }
+  }
+}
