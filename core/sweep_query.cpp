@@ -263,9 +263,9 @@ TriangleHit QueryStream::hitOn(TriangleIndex face, const Vec3& p) const {
 
 // Depth-first search from the root with best squared distance start2 (best_face holds its face).
 // With reach > 0, the faces within sqrt(best) + reach (as best shrinks) are gathered into
-// gathered_, at most the nearest capacity + 1 of them (the search narrows to the farthest kept
-// once that many are found), and pruned_lower_ bounds from below the distance of every face not
-// gathered. Returns the best squared distance; best_face is its face.
+// gathered_ (at most about twice capacity + 1: past that only the nearest capacity + 1 are kept
+// and the search narrows to the farthest of them), and pruned_lower_ bounds from below the
+// distance of every face not gathered. Returns the best squared distance; best_face is its face.
 double QueryStream::depthFirst(const Vec3& p, double start2, double reach, TriangleIndex& best_face,
                                uint32_t capacity) {
   const Hierarchy& h = *hierarchy_;
@@ -285,6 +285,7 @@ double QueryStream::depthFirst(const Vec3& p, double start2, double reach, Trian
   // With reach > 0: the smallest box bound pruned and squared distance not gathered.
   float pruned_box = kFloatInf;
   double pruned_face2 = kInf;
+  double kept_limit2 = kInf;  // with reach > 0: nothing farther is needed in gathered_
   stack_.clear();
   stack_.push_back({0, 0.0f});
   float dist[8];
@@ -306,25 +307,22 @@ double QueryStream::depthFirst(const Vec3& p, double start2, double reach, Trian
         }
       }
       if (reach > 0) {
-        gather2 = limit2();
-        if (gathered_.size() > capacity) gather2 = std::min(gather2, gathered_.front().first);
+        gather2 = std::min(limit2(), kept_limit2);
         for (uint32_t lane = 0; lane < used; ++lane) {
           if (!(exact[lane] <= gather2)) {
             pruned_face2 = std::min(pruned_face2, exact[lane]);
             continue;
           }
-          // The nearest capacity + 1 faces, as a max-heap once full: its top is then the
-          // farthest the set can reach, so nothing beyond it needs opening.
           gathered_.emplace_back(exact[lane], lanes[8 * leaf + lane]);
-          if (gathered_.size() == capacity + 1) {
-            std::make_heap(gathered_.begin(), gathered_.end());
-          } else if (gathered_.size() > capacity + 1) {
-            std::push_heap(gathered_.begin(), gathered_.end());
-            std::pop_heap(gathered_.begin(), gathered_.end());
-            pruned_face2 = std::min(pruned_face2, gathered_.back().first);
-            gathered_.pop_back();
+          // Twice too many: keep the nearest capacity + 1 (a partial selection). The farthest
+          // kept is as far as the set can reach, so nothing beyond it needs opening.
+          if (gathered_.size() >= 2 * (static_cast<size_t>(capacity) + 1)) {
+            std::nth_element(gathered_.begin(), gathered_.begin() + capacity, gathered_.end());
+            kept_limit2 = gathered_[capacity].first;  // the dropped ones are at least as far
+            pruned_face2 = std::min(pruned_face2, kept_limit2);
+            gathered_.resize(capacity + 1);
+            gather2 = std::min(gather2, kept_limit2);
           }
-          if (gathered_.size() > capacity) gather2 = std::min(gather2, gathered_.front().first);
         }
       } else {
         gather2 = best2;

@@ -45,7 +45,7 @@ struct CoherenceOptions {
   // Set certificate: candidates are gathered within d + 2R of the anchor point, with
   // R = reach_steps * (running mean step length); a larger R means fewer rebuilds, larger sets.
   // Defaults measured in bench_dynamic (armadillo and refined_elephant, off5%/step0.05%).
-  double reach_steps = 1.5;
+  double reach_steps = 2;
   // At most this many candidate faces (the nearest are kept; the certificate shrinks to fit).
   uint32_t max_candidates = 64;
   // Dynamic front: back to the roots when the front holds more entries than this, or when the
