@@ -13,9 +13,11 @@
 // above by covering it, whole or in up to 64 midpoint pieces, with single faces of B taken from
 // the hierarchy's leaf blocks that hold its corners' closest triangles (cover bound: the
 // distance to one face is convex, so it peaks at a piece's corners), else with the closest
-// points of its corners (bisector bound, paper Fig. 9); split the triangles whose bound is
-// highest into four by their edge midpoints until the highest bound is within the tolerance of
-// the best sample. See hausdorff.cpp.
+// points of its corners (bisector bound, paper Fig. 9); where a piece cannot be covered, query
+// its centroid and add the leaf block of its closest face before giving up (that point is a
+// sample for the lower bound too); split the triangles whose bound is highest into four by
+// their edge midpoints until the highest bound is within the tolerance of the best sample. See
+// hausdorff.cpp.
 //
 // Visiting order: the paper visits samples along "peels" (spiral triangle strips, Fig. 8) so
 // successive queries are close and the coherent query pays off. A prototype measured that
@@ -68,13 +70,16 @@ struct HausdorffCounters {
   uint64_t triangles_tested = 0;   // exact point-triangle distances inside those queries
   uint64_t triangles_refined = 0;  // (sub)triangles of A split into four
   uint64_t cells = 0;              // (sub)triangles bounded (original triangles included)
-  uint64_t face_bound_wins = 0;    // cells bounded by faces of B (cover bound), not bisectors
+  uint64_t face_bound_wins = 0;    // cells bounded by faces of B (cover bound), not by the
+                                   // corner bound (hausdorff.cpp) or bisectors
   uint32_t rounds = 0;             // refinement rounds
 };
 
 // h(A, B): one direction.
 struct OneSidedHausdorff {
-  double lower = 0;        // certified: h(A, B) >= lower (the exact distance of `at` to B)
+  double lower = 0;        // certified: h(A, B) >= lower (the exact distance of `at` to B;
+                           // `at` is a vertex, a refinement midpoint or a point the cover
+                           // bound queried)
   double upper = 0;        // certified: h(A, B) <= upper
   Vec3 at = Vec3::Zero();  // the point of A at distance `lower` from B
   TriangleIndex at_triangle = kInvalidIndex;       // a triangle of A that contains `at`

@@ -500,3 +500,71 @@ TEST_CASE("real mesh against a coarse version: brute force inside the bounds") {
   requireIdentical(result.a_to_b, two.a_to_b);
   requireIdentical(result.b_to_a, two.b_to_a);
 }
+
+// Dense brute force over every triangle of `from` (a barycentric grid of `steps` per edge): the
+// largest distance to `to` found at those points.
+double denseMaximum(const Mesh& from, const Mesh& to, int steps) {
+  double best = 0;
+  for (const Triangle& t : from.triangles) {
+    const Vec3 a = from.positions[t[0]], b = from.positions[t[1]], c = from.positions[t[2]];
+    for (int i = 0; i <= steps; ++i)
+      for (int j = 0; i + j <= steps; ++j) {
+        const double u = static_cast<double>(i) / steps, v = static_cast<double>(j) / steps;
+        best = std::max(best, bruteDistance(to, a + u * (b - a) + v * (c - a)));
+      }
+  }
+  return best;
+}
+
+// A few large triangles over a folded surface (creased valleys): the distance peaks in many
+// spots inside each triangle, away from its corners, where the closest faces switch, so the
+// bounds come from covers of pieces, the corner bound and the extra queries. The upper bound
+// must stay above the dense brute-force maximum at tolerances far below the folds' depth (a
+// cover bound that ignores a piece's third corner fails here, as in the valley case below).
+TEST_CASE("large triangles over a folded surface: upper bound above dense brute force") {
+  const int n = 24;
+  Mesh folded = scenes::gridPlane(n, 1.0);
+  for (Vec3& p : folded.positions)
+    p.z() = -0.01 - 0.03 * (1 - std::abs(std::sin(9 * p.x() + 1))) * (1 - std::abs(std::sin(8 * p.y() + 2)));
+  const Mesh coarse = scenes::gridPlane(2, 0.9);
+  for (const double tolerance : {1e-7, 1e-5}) {
+    const HausdorffResult one = hausdorffOneSided(coarse, folded, absolute(tolerance, 1));
+    INFO("tolerance " << tolerance);
+    CHECK(one.upper - one.lower <= tolerance);
+    const double dense = denseMaximum(coarse, folded, 80);
+    CHECK(one.upper >= dense - 1e-12);
+    checkAgainstBruteForce(one.a_to_b, coarse, folded, 500, 11);
+  }
+  // Both directions, symmetric, with the fine side covered by the coarse one.
+  const HausdorffResult both = hausdorff(folded, coarse, absolute(1e-6, 1));
+  CHECK(both.upper - both.lower <= 1e-6);
+  CHECK(both.b_to_a.upper >= denseMaximum(coarse, folded, 60) - 1e-12);
+  const HausdorffResult two = hausdorff(folded, coarse, absolute(1e-6, 2));
+  requireIdentical(both.a_to_b, two.a_to_b);
+  requireIdentical(both.b_to_a, two.b_to_a);
+}
+
+// A triangle over a V-shaped valley of two large faces: its corners are closest to the walls
+// (two corners to one wall, one to the other) and the distance peaks above the crease, inside
+// the triangle, at 1/sqrt(1 + k^2) for walls z = k|x| - 1. The leaf block holding both walls
+// covers the two corners on one side with that wall, so a cover bound that ignored a piece's
+// third corner would make the triangle final at once with an upper bound of its corners'
+// distance, 0.8/sqrt(1 + k^2).
+TEST_CASE("a triangle over a valley: the maximum above the crease, away from the corners") {
+  const double k = 0.2;
+  Mesh valley;
+  valley.name = "valley";
+  valley.positions = {Vec3(0, -10, -1), Vec3(0, 10, -1), Vec3(10, 0, 10 * k - 1),
+                      Vec3(-10, 0, 10 * k - 1)};
+  valley.triangles = {{0, 1, 2}, {1, 0, 3}};
+  const Mesh triangle = singleTriangle(Vec3(1, -1, 0), Vec3(1, 1, 0), Vec3(-1, 0, 0));
+  const double exact = 1 / std::sqrt(1 + k * k);
+  for (const double tolerance : {1e-9, 1e-4, 0.05}) {
+    INFO("tolerance " << tolerance);
+    const HausdorffResult r = hausdorffOneSided(triangle, valley, absolute(tolerance, 1));
+    CHECK(r.upper >= exact - 1e-12);
+    CHECK(r.lower <= exact + 1e-12);
+    CHECK(r.upper - r.lower <= tolerance);
+    checkAgainstBruteForce(r.a_to_b, triangle, valley, 200, 5);
+  }
+}
