@@ -18,10 +18,15 @@
 //
 // Coherent exact query (set certificate, DESIGN.md section 2): at an anchor q0 with distance
 //   D0, gather every face within D0 + 2R (at most max_candidates, the nearest; then the reach L
-//   is the distance of the first face left out). Every other face f has d(q0, f) >= L, so for
-//   a later point p, d(p, f) >= L - |p - q0|. If the best candidate is at M with
-//   M + |p - q0| < L, no other face can be closer: M is exact. Else rebuild at p, the
-//   depth-first query starting from the distance to the previous closest face.
+//   is the distance of the first face left out; if the search pruned nothing nearer than some
+//   L' > D0 + 2R, L = L'). Every other face f has d(q0, f) >= L, so for a later point p,
+//   d(p, f) >= L - |p - q0|. If the best candidate is at M with M + |p - q0| < L, no other
+//   face can be closer: M is exact. Else rebuild at p, the depth-first query starting from the
+//   distance to the previous closest face. The nearest eight candidates are tested first, the
+//   others only if their least distance at q0, minus |p - q0|, is below M.
+//   With a cap c (closest within c): D0 is min(D0, c), and min(M, c) + |p - q0| < L proves
+//   the answer, "none within c" when M > c. On a deforming geometry of the same lineage, faces
+//   moved by at most the growth of its drift since q0: it adds to |p - q0| in every bound.
 // Dynamic front (paper section 5.1): the front persists; moving by delta lowers every bound by
 //   delta. Entries store bound + drift-at-computation, so the current bound is key - drift and
 //   the heap order never changes; a stale entry reaching the top is recomputed and pushed back.
