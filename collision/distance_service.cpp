@@ -12,9 +12,9 @@
 //     for each point p, for each candidate body b (by slot):
 //       q <- p in b's frame (rigid: the inverse pose; key-framed and deforming: p itself, the
 //            thread's stream for b reads b's current TreeGeometry)
-//       closest: skip the pair if it provably cannot reach d (rigid: the last distance minus
-//                the motion since; else the tree's boxes, unless the last face is within d);
-//                c <- stream.closestCoherent(q, pair state); keep the smallest c.distance <= d
+//       closest: c <- stream.closestCoherent(q, pair state, d): the closest face within d, or
+//                none, searched no farther than d (the pair's certificate often answers
+//                without a search); keep the smallest c.distance
 //       within:  every triangle within d (stream.within)
 //     hits: world point and direction, sign from the pseudonormal at the closest feature
 //   within mode: the blocks' hits are concatenated in block order
