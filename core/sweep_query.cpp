@@ -522,6 +522,10 @@ ClosestPoint QueryStream::closestCoherent(const Vec3& p, CoherentState& state, b
   // face warm-starts the search and the set's certificate shrinks by that much.
   const bool same_lineage = state.lineage != 0 && state.lineage == g.lineage;
   const double cap = max_distance >= 0 ? max_distance : 0;  // NaN: 0
+  // Faces within the cap plus the rounding of a computed distance (relative 1e-12, absolute
+  // 1e-15 of the mesh's size) count as within it.
+  const double within = cap < kInf ? cap * (1 + 1e-12) + 1e-15 / g.box_scale : kInf;
+  const double within2 = within * within;
   if (same_lineage) {
     const double step = (p - state.last_point).norm() + (g.drift - state.last_drift);
     state.mean_step = state.mean_step > 0 ? 0.9f * state.mean_step + 0.1f * static_cast<float>(step)
@@ -536,7 +540,7 @@ ClosestPoint QueryStream::closestCoherent(const Vec3& p, CoherentState& state, b
       // The nearest eight first; the rest only if they could be closer (or within the cap).
       double exact[8];
       for (uint32_t first = 0; first < state.count; first += 8) {
-        if (first == 8 && state.block_lower[1] - moved > std::min(std::sqrt(best2), cap) * (1 + 1e-9)) break;
+        if (first == 8 && state.block_lower[1] - moved > std::min(std::sqrt(best2), within) * (1 + 1e-9)) break;
         const uint32_t lanes = std::min<uint32_t>(8, state.count - first);
         for (uint32_t lane = 0; lane < 8; ++lane) {
           const Triangle& t = mesh.triangles[state.faces[first + (lane < lanes ? lane : 0)]];
@@ -552,14 +556,13 @@ ClosestPoint QueryStream::closestCoherent(const Vec3& p, CoherentState& state, b
       }
       // Every face outside the set is at least reach - moved away: nothing there is closer
       // than the best candidate, or within the cap when no candidate is.
-      certified = std::min(std::sqrt(best2), cap) + moved < state.reach * (1 - 1e-9);
-      if (certified && !(best2 <= cap * cap * (1 + 1e-12))) face = kInvalidIndex;
+      certified = std::min(std::sqrt(best2), within) + moved < state.reach * (1 - 1e-9);
+      if (certified && !(best2 <= within2)) face = kInvalidIndex;
     }
   }
   if (!certified) {
-    // Start from the previous face's distance, or the cap if smaller (slightly widened: a face
-    // at exactly the cap is found).
-    double start2 = cap < kInf ? cap * cap * (1 + 1e-12) : kInf;
+    // Start from the previous face's distance, or the cap if smaller.
+    double start2 = within2;
     face = kInvalidIndex;
     if (same_lineage && state.last_face < mesh.triangles.size()) {
       const Triangle& t = mesh.triangles[state.last_face];

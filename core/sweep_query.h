@@ -134,7 +134,8 @@ class QueryStream {
   // survives changes of the geometry within a lineage (deforming bodies), else only its
   // previous face warm-starts the search.
   // With max_distance finite the question is "the closest face within max_distance": the same
-  // answer as closest() when that is within max_distance (up to a relative 1e-12), else no face
+  // answer as closest() when that is within max_distance (up to a relative 1e-12 and 1e-15 of
+  // the mesh's size: the rounding of a computed distance), else no face
   // (triangle kInvalidIndex, distance +infinity), found or certified without looking farther.
   ClosestPoint closestCoherent(const Vec3& p, CoherentState& state, bool* certified = nullptr,
                                double max_distance = std::numeric_limits<double>::infinity());

@@ -415,6 +415,73 @@ TEST_CASE("coherent queries along paths on procedural meshes", "[coherent]") {
     checkMesh(c, 500, 0xc0ffee11);
 }
 
+// The cap of closestCoherent(p, state, ..., max_distance): 0 on and off the surface, negative
+// and NaN caps (taken as 0), caps a hair either side of the truth, and a cap that changes at
+// every step of a path while one state follows the point.
+TEST_CASE("coherent queries: capped compact states", "[coherent]") {
+  const Mesh mesh = scenes::torus(1.0, 0.3, 64, 32);
+  const auto h = Hierarchy::build(mesh);
+  const double diagonal = meshDiagonal(mesh);
+  const Checker checker{mesh, diagonal};
+  QueryStream stream(h);
+  const double inf = std::numeric_limits<double>::infinity();
+  auto none = [&](const ClosestPoint& r, double cap) {
+    return r.triangle == kInvalidIndex && r.distance == inf && r.upper == inf && r.lower == cap;
+  };
+  {
+    INFO("cap 0 on a vertex: the vertex's faces are at distance 0");
+    const Vec3 p = mesh.positions[mesh.triangles[10][1]];
+    CoherentState state;
+    const ClosestPoint r = stream.closestCoherent(p, state, nullptr, 0.0);
+    CHECK(r.triangle < mesh.triangles.size());
+    CHECK(r.distance == 0);
+  }
+  {
+    INFO("cap 0, negative or NaN off the surface: none, lower bound 0");
+    const Vec3 p(1.0, 0.1, 0.35);
+    for (double cap : {0.0, -1.0, std::numeric_limits<double>::quiet_NaN()}) {
+      CoherentState state;
+      CHECK(none(stream.closestCoherent(p, state, nullptr, cap), 0.0));
+    }
+  }
+  {
+    INFO("caps a hair either side of the truth");
+    const Vec3 p(1.0, 0.1, 0.35);
+    const double truth = bruteForceClosest(mesh, p).distance;
+    CoherentState below, above;
+    CHECK(none(stream.closestCoherent(p, below, nullptr, truth * (1 - 1e-6)), truth * (1 - 1e-6)));
+    CHECK(stream.closestCoherent(p, above, nullptr, truth * (1 + 1e-6)).distance == Approx(truth).epsilon(1e-12));
+  }
+  {
+    INFO("one state along a path, a new cap at every step");
+    const PathSpec spec{"step 0.05%, within 3%, crossing", 0.0005, 0.0, 0.03, 1500, 0, 0xcab5};
+    const std::vector<Vec3> path = makePath(mesh, h, spec);
+    Random random(0xcab6);
+    CoherentState state;
+    Failures f("closestCoherent with a changing cap");
+    size_t certified_steps = 0, hits = 0, nones = 0;
+    for (size_t i = 0; i < path.size(); ++i) {
+      const Vec3& p = path[i];
+      const double cap = random.uniform(0, 0.03) * diagonal;
+      INFO("step " << i << ", point " << text(p) << ", cap " << num(cap));
+      const Truth truth{bruteForceKClosest(mesh, p, 1)};
+      bool certified = false;
+      const ClosestPoint r = stream.closestCoherent(p, state, &certified, cap);
+      certified_steps += certified;
+      if (truth.closest() <= cap * (1 - 1e-9)) {
+        checker.exact(r, p, truth, f);
+        ++hits;
+      } else if (truth.closest() > cap * (1 + 1e-9)) {
+        f.check(none(r, cap), [&] { return "brute force " + num(truth.closest()) + ", got a face at " + num(r.distance); });
+        ++nones;
+      }
+    }
+    CHECK(hits > 100);
+    CHECK(nones > 100);
+    CHECK(certified_steps > 100);
+  }
+}
+
 TEST_CASE("coherent queries: a stationary point", "[coherent]") {
   const Mesh mesh = scenes::torus(1.0, 0.3, 64, 32);
   const auto h = Hierarchy::build(mesh);
