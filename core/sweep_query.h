@@ -68,7 +68,7 @@ struct CoherenceCounters {
 // zero-initialised (default-constructed) means a cold start. Used with
 // QueryStream::closestCoherent(p, state, ...), where the stream lends its scratch memory; the
 // state keeps only the certificate: an anchor, a reach and up to kCoherentSetSize candidate
-// faces, the nearest eight first. It stays valid while the geometry moves within its lineage
+// faces, tested eight at a time. It stays valid while the geometry moves within its lineage
 // (TreeGeometry::lineage, ::drift): a deforming body's faces are re-read at their current
 // positions and the certificate shrinks by how far they may have moved.
 inline constexpr uint32_t kCoherentSetSize = 32;
@@ -84,7 +84,7 @@ struct CoherentState {
   float reach_steps = 2;             // R = reach_steps * mean_step (see CoherenceOptions); 0: no set
   bool has_set = false;              // anchor, reach and faces hold a certificate
   Vec3 last_point = Vec3::Zero();
-  TriangleIndex faces[kCoherentSetSize];        // the nearest eight to anchor first
+  TriangleIndex faces[kCoherentSetSize];        // candidates, in blocks of eight
   float block_lower[kCoherentSetSize / 8] = {};  // faces[8b..count) were at least this far
 };
 
