@@ -16,6 +16,8 @@
 #include "core/triangle_distance.h"
 #include "scenes/procedural.h"
 
+#include "tests/oracle.h"
+
 #include <catch2/catch.hpp>
 
 #include <algorithm>
@@ -30,30 +32,13 @@
 #include <vector>
 
 using namespace meshsweeper;
+using namespace meshsweeper::oracle;
 using scenes::Random;
 
 namespace {
 
 constexpr double kEps = std::numeric_limits<double>::epsilon();
 constexpr uint32_t kMaxDepth = 40;
-
-// A real mesh from data/meshes, read once per test binary. A missing file is a failure: the
-// test command extracts the meshes first.
-const Mesh* realMesh(const std::string& name) {
-  static std::map<std::string, std::unique_ptr<Mesh>> cache;
-  auto it = cache.find(name);
-  if (it != cache.end()) return it->second.get();
-  const std::string path = scenes::meshPath(name);
-  std::unique_ptr<Mesh> mesh;
-  if (!std::filesystem::exists(path)) {
-    WARN("real mesh missing: " << path << " (run scripts/fetch_data.sh)");
-    FAIL_CHECK("missing real mesh " << name);
-  } else {
-    mesh = std::make_unique<Mesh>(readMesh(path));
-    mesh->name = name;
-  }
-  return cache.emplace(name, std::move(mesh)).first->second.get();
-}
 
 // Rounding scale of a mesh: a few ulps of its largest coordinate. Points computed as barycentric
 // combinations are off by about this much, so bounds are checked with it as absolute slack.
@@ -133,32 +118,6 @@ std::string describeSlot(const Hierarchy& h, SlotRef s) {
   return out.str();
 }
 
-std::string pointText(const Vec3& p) {
-  std::ostringstream out;
-  out.precision(17);
-  out << "(" << p.x() << ", " << p.y() << ", " << p.z() << ")";
-  return out.str();
-}
-
-// Counts failures of one invariant and reports only the first few in full.
-class Failures {
- public:
-  explicit Failures(const char* what) : what_(what) {}
-  template <class F>
-  void check(bool ok, F&& message) {
-    if (ok) return;
-    if (++count_ <= 5) FAIL_CHECK(what_ << ": " << message());
-  }
-  ~Failures() {
-    if (count_ > 5) FAIL_CHECK(what_ << ": " << count_ << " failures in all");
-  }
-  size_t count() const { return count_; }
-
- private:
-  const char* what_;
-  size_t count_ = 0;
-};
-
 // (b) Cover on random fronts.
 void checkCover(const Hierarchy& h, uint64_t seed) {
   const Mesh& mesh = h.mesh();
@@ -189,7 +148,7 @@ void checkCover(const Hierarchy& h, uint64_t seed) {
           volume.check(d <= eps * (1 + 1e-12) + slack, [&] {
             std::ostringstream out;
             out.precision(17);
-            out << "open " << open << ", face " << f << ", point " << pointText(x) << ", distance " << d
+            out << "open " << open << ", face " << f << ", point " << text(x) << ", distance " << d
                 << " > eps, " << describeSlot(h, s);
             return out.str();
           });
@@ -199,7 +158,7 @@ void checkCover(const Hierarchy& h, uint64_t seed) {
             inside = inside && n.lower[axis][s.slot] <= scaled[axis] && scaled[axis] <= n.upper[axis][s.slot];
           box.check(inside, [&] {
             return "open " + std::to_string(open) + ", face " + std::to_string(f) + ", point " +
-                   pointText(x) + ", " + describeSlot(h, s);
+                   text(x) + ", " + describeSlot(h, s);
           });
         }
       }
@@ -662,7 +621,7 @@ TEST_CASE("hierarchy: shared read-only by two threads", "[hierarchy][threads]") 
       const bool same = sameClosest(a.closest, single[i].closest) &&
                         sameClosest(a.within, single[i].within) && sameHits(a.k, single[i].k);
       if (!same && ++differ <= 5)
-        FAIL_CHECK("point " << i << " " << pointText(points[i]) << " differs between threads");
+        FAIL_CHECK("point " << i << " " << text(points[i]) << " differs between threads");
     }
     CHECK(differ == 0);
   }

@@ -17,6 +17,8 @@
 #include "core/triangle_distance.h"
 #include "scenes/procedural.h"
 
+#include "tests/oracle.h"
+
 #include <catch2/catch.hpp>
 
 #include <algorithm>
@@ -35,6 +37,7 @@
 #include <vector>
 
 using namespace meshsweeper;
+using namespace meshsweeper::oracle;
 using scenes::Random;
 
 // Counts allocations of the whole binary, so a test can assert that warm queries allocate
@@ -72,61 +75,6 @@ constexpr double kDoubleEps = std::numeric_limits<double>::epsilon();
 
 bool sameDistance(double got, double expected) {
   return std::abs(got - expected) <= kRelative * std::max(std::abs(got), std::abs(expected)) + kZero;
-}
-
-std::string num(double x) {
-  std::ostringstream out;
-  out.precision(17);
-  out << x;
-  return out.str();
-}
-
-std::string pointText(const Vec3& p) {
-  return "(" + num(p.x()) + ", " + num(p.y()) + ", " + num(p.z()) + ")";
-}
-
-// Counts failures of one kind of check; reports the first few in full (with the INFO context of
-// the point), then a total.
-class Failures {
- public:
-  explicit Failures(std::string what) : what_(std::move(what)) {}
-  Failures(const Failures&) = delete;
-  Failures& operator=(const Failures&) = delete;
-  template <class F>
-  void check(bool ok, F&& message) {
-    ++checks_;
-    if (ok) return;
-    if (++count_ <= kShown) FAIL_CHECK(what_ << ": " << message());
-  }
-  ~Failures() {
-    if (count_ > kShown)
-      FAIL_CHECK(what_ << ": " << count_ << " failures in all (first " << kShown << " shown)");
-  }
-  size_t checks() const { return checks_; }
-
- private:
-  static constexpr size_t kShown = 4;
-  std::string what_;
-  size_t count_ = 0;
-  size_t checks_ = 0;
-};
-
-// A real mesh from data/meshes, read once per test binary. A missing file is a failure: the
-// test command extracts the meshes first.
-const Mesh* realMesh(const std::string& name) {
-  static std::map<std::string, std::unique_ptr<Mesh>> cache;
-  auto it = cache.find(name);
-  if (it != cache.end()) return it->second.get();
-  const std::string path = scenes::meshPath(name);
-  std::unique_ptr<Mesh> mesh;
-  if (!std::filesystem::exists(path)) {
-    WARN("real mesh missing: " << path << " (run scripts/fetch_data.sh)");
-    FAIL_CHECK("missing real mesh " << name);
-  } else {
-    mesh = std::make_unique<Mesh>(readMesh(path));
-    mesh->name = name;
-  }
-  return cache.emplace(name, std::move(mesh)).first->second.get();
 }
 
 // ---- The reference ------------------------------------------------------------------------
@@ -257,8 +205,8 @@ bool onFace(const Mesh& mesh, TriangleIndex f, const Vec3& point, const Vec3& ba
   const double magnitude = std::max(point.cwiseAbs().maxCoeff(), combined.cwiseAbs().maxCoeff());
   const bool point_ok = (combined - point).norm() <= 1e-9 * diagonal + 16 * kDoubleEps * magnitude;
   if (!bary_ok || !point_ok) {
-    why = "point " + pointText(point) + " is not b0*A + b1*B + b2*C of face " + std::to_string(f) +
-          " (barycentric " + pointText(bary) + ", combination " + pointText(combined) + ")";
+    why = "point " + text(point) + " is not b0*A + b1*B + b2*C of face " + std::to_string(f) +
+          " (barycentric " + text(bary) + ", combination " + text(combined) + ")";
     return false;
   }
   return true;
@@ -481,7 +429,7 @@ Summary runOracle(const Mesh& mesh, const std::shared_ptr<const Hierarchy>& h,
   for (const PointSet& set : sets) {
     for (size_t i = 0; i < set.points.size(); ++i, ++index) {
       const Vec3& p = set.points[i];
-      INFO(set.kind << " point " << i << " " << pointText(p));
+      INFO(set.kind << " point " << i << " " << text(p));
       ref.compute(mesh, p, 21);
       const ExactContext c{mesh, ref, p, diagonal};
       const double truth = ref.closest();
@@ -631,7 +579,7 @@ TEST_CASE("queries: the centre of a finely tessellated sphere", "[queries][worst
   const std::vector<Vec3> points = {Vec3::Zero(), Vec3(1e-9, -2e-9, 3e-9), Vec3(0.01, 0.02, -0.03),
                                     Vec3(0, 0, 0.5)};
   for (const Vec3& p : points) {
-    INFO("point " << pointText(p));
+    INFO("point " << text(p));
     ref.compute(sphere, p, 21);
     const ExactContext c{sphere, ref, p, diagonal};
     Failures failures("centre of the sphere");
@@ -718,7 +666,7 @@ TEST_CASE("queries: a stream moved between meshes' points answers like a fresh o
       warm.within(p, 0.05, warm_hits);
       QueryStream(h).within(p, 0.05, cold_hits);
       same = same && sameHits(warm_hits, cold_hits);
-      if (!same && ++differ <= 5) FAIL_CHECK("point " << i << " " << pointText(p) << ": warm != cold");
+      if (!same && ++differ <= 5) FAIL_CHECK("point " << i << " " << text(p) << ": warm != cold");
     }
   }
   CHECK(differ == 0);

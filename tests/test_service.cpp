@@ -21,6 +21,8 @@
 #include "core/triangle_distance.h"
 #include "scenes/procedural.h"
 
+#include "tests/oracle.h"
+
 #include <catch2/catch.hpp>
 
 #include <Eigen/Geometry>
@@ -38,6 +40,7 @@
 #include <vector>
 
 using namespace meshsweeper;
+using namespace meshsweeper::oracle;
 using scenes::Random;
 
 namespace {
@@ -45,52 +48,6 @@ namespace {
 constexpr double kTolerance = 1e-10;
 constexpr double kPi = 3.14159265358979323846;
 constexpr double kInf = std::numeric_limits<double>::infinity();
-
-std::string text(const Vec3& p) {
-  std::ostringstream out;
-  out.precision(17);
-  out << "(" << p.x() << ", " << p.y() << ", " << p.z() << ")";
-  return out.str();
-}
-
-// Counts the failures of one kind of check; shows the first few in full, then a total.
-class Failures {
- public:
-  explicit Failures(std::string what) : what_(std::move(what)) {}
-  Failures(const Failures&) = delete;
-  Failures& operator=(const Failures&) = delete;
-  template <class F>
-  void check(bool ok, F&& message) {
-    ++checks_;
-    if (ok) return;
-    if (++count_ <= kShown) FAIL_CHECK(what_ << ": " << message());
-  }
-  size_t checks() const { return checks_; }
-  ~Failures() {
-    if (count_ > kShown) FAIL_CHECK(what_ << ": " << count_ << " failures in all (first " << kShown << " shown)");
-  }
-
- private:
-  static constexpr size_t kShown = 4;
-  std::string what_;
-  size_t count_ = 0;
-  size_t checks_ = 0;
-};
-
-const Mesh* realMesh(const std::string& name) {
-  static std::map<std::string, std::unique_ptr<Mesh>> cache;
-  auto it = cache.find(name);
-  if (it != cache.end()) return it->second.get();
-  const std::string path = scenes::meshPath(name);
-  std::unique_ptr<Mesh> mesh;
-  if (!std::filesystem::exists(path)) {
-    FAIL_CHECK("missing real mesh " << path << " (run scripts/fetch_data.sh)");
-  } else {
-    mesh = std::make_unique<Mesh>(readMesh(path));
-    mesh->name = name;
-  }
-  return cache.emplace(name, std::move(mesh)).first->second.get();
-}
 
 Eigen::Isometry3d makePose(double angle, const Vec3& axis, const Vec3& translation) {
   Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();
