@@ -26,6 +26,7 @@
 //   --meshes=a,b,c          --methods=meshsweeper,embree,embree-mskernel,cgal,brute
 //   --data-dir=PATH         where MESH.off is found (default: scenes::dataDir())
 // Exit code 77 when a mesh file is missing (ctest skips).
+#include "bench/bench_util.h"
 #include "bench/peers.h"
 #include "core/brute_force.h"
 #include "core/hierarchy.h"
@@ -52,6 +53,9 @@
 
 namespace meshsweeper::bench {
 namespace {
+
+[[noreturn]] void usageError(const std::string& message) { bench::usageError("bench_closest", message); }
+size_t parseCount(const std::string& flag, const std::string& value) { return bench::parseCount("bench_closest", flag, value); }
 
 using Clock = std::chrono::steady_clock;
 
@@ -115,30 +119,6 @@ std::map<std::string, size_t> g_triangle_counts;  // [mesh name] triangles, for 
 bool enabled(Method m) {
   return std::find(g_options.methods.begin(), g_options.methods.end(), m) !=
          g_options.methods.end();
-}
-
-std::vector<std::string> splitList(const std::string& s) {
-  std::vector<std::string> out;
-  size_t start = 0;
-  while (start <= s.size()) {
-    const size_t comma = s.find(',', start);
-    const size_t end = comma == std::string::npos ? s.size() : comma;
-    if (end > start) out.push_back(s.substr(start, end - start));
-    start = end + 1;
-  }
-  return out;
-}
-
-[[noreturn]] void usageError(const std::string& message) {
-  std::fprintf(stderr, "bench_closest: %s\n", message.c_str());
-  std::exit(2);
-}
-
-size_t parseCount(const std::string& flag, const std::string& value) {
-  char* end = nullptr;
-  const unsigned long long n = std::strtoull(value.c_str(), &end, 10);
-  if (value.empty() || *end != '\0' || n == 0) usageError(flag + " needs a positive integer");
-  return static_cast<size_t>(n);
 }
 
 // Parses and removes this program's flags from argv; the rest goes to Google Benchmark.
@@ -473,13 +453,6 @@ void registerBenchmarks() {
 // ---------------------------------------------------------------------------------------------
 // Summary
 
-std::string format(const char* fmt, double v) {
-  if (!std::isfinite(v)) return "-";
-  char buffer[64];
-  std::snprintf(buffer, sizeof buffer, fmt, v);
-  return buffer;
-}
-
 void printSummary() {
   if (g_samples.empty()) return;
   FILE* out = g_options.summary_to_stderr ? stderr : stdout;
@@ -514,10 +487,10 @@ void printSummary() {
         const double nodes = m == Method::kMeshsweeper && q ? q->nodes * per_query : NAN;
         std::fprintf(out, "| %s | %zu | %s | %s | %s | %s | %s | %s | %s | %s | %s |\n",
                      mesh.c_str(), g_triangle_counts[mesh], set, methodName(m),
-                     format("%.3f", build_s).c_str(),
-                     format("%.2f", build_s / embree_build_s).c_str(), format("%.0f", qps).c_str(),
-                     format("%.2f", 1e6 / qps).c_str(), format("%.2f", qps / embree_qps).c_str(),
-                     format("%.1f", tris).c_str(), format("%.1f", nodes).c_str());
+                     formatCell("%.3f", build_s).c_str(),
+                     formatCell("%.2f", build_s / embree_build_s).c_str(), formatCell("%.0f", qps).c_str(),
+                     formatCell("%.2f", 1e6 / qps).c_str(), formatCell("%.2f", qps / embree_qps).c_str(),
+                     formatCell("%.1f", tris).c_str(), formatCell("%.1f", nodes).c_str());
       }
     }
   }

@@ -40,6 +40,7 @@
 //   --reach-steps=R  --max-candidates=N   CoherenceOptions of ms_coherent/ms_front (default:
 //                    the library's defaults), for tuning
 // Exit code 77 when a mesh file is missing (ctest skips).
+#include "bench/bench_util.h"
 #include "bench/peers.h"
 #include "bench/peers_dynamic.h"
 #include "core/brute_force.h"
@@ -69,6 +70,9 @@
 namespace meshsweeper::bench {
 namespace {
 
+[[noreturn]] void usageError(const std::string& message) { bench::usageError("bench_dynamic", message); }
+size_t parseCount(const std::string& flag, const std::string& value) { return bench::parseCount("bench_dynamic", flag, value); }
+
 using Clock = std::chrono::steady_clock;
 constexpr double kPi = 3.14159265358979323846;
 
@@ -93,30 +97,6 @@ struct Options {
   bool summary_to_stderr = false;
 };
 Options g_options;
-
-std::vector<std::string> splitList(const std::string& s) {
-  std::vector<std::string> out;
-  size_t start = 0;
-  while (start <= s.size()) {
-    const size_t comma = s.find(',', start);
-    const size_t end = comma == std::string::npos ? s.size() : comma;
-    if (end > start) out.push_back(s.substr(start, end - start));
-    start = end + 1;
-  }
-  return out;
-}
-
-[[noreturn]] void usageError(const std::string& message) {
-  std::fprintf(stderr, "bench_dynamic: %s\n", message.c_str());
-  std::exit(2);
-}
-
-size_t parseCount(const std::string& flag, const std::string& value) {
-  char* end = nullptr;
-  const unsigned long long n = std::strtoull(value.c_str(), &end, 10);
-  if (value.empty() || *end != '\0' || n == 0) usageError(flag + " needs a positive integer");
-  return static_cast<size_t>(n);
-}
 
 void parseOwnFlags(int& argc, char** argv) {
   int kept = 1;
@@ -802,13 +782,6 @@ void registerBenchmarks() {
 // ---------------------------------------------------------------------------------------------
 // Summary
 
-std::string format(const char* fmt, double v) {
-  if (!std::isfinite(v)) return "-";
-  char buffer[64];
-  std::snprintf(buffer, sizeof buffer, fmt, v);
-  return buffer;
-}
-
 const Samples* findSamples(const std::string& key) {
   auto it = g_samples.find(key);
   return it == g_samples.end() || it->second.seconds.empty() ? nullptr : &it->second;
@@ -835,13 +808,13 @@ void printSummary() {
         const double per_step = s->passes > 0 ? s->triangles / (s->passes * static_cast<double>(s->count)) : NAN;
         std::string notes;
         if (m == PathMethod::kMsCoherent && s->steps > 0)
-          notes = format("%.1f", 100 * s->certified / s->steps) + "% certified, " +
-                  format("%.1f", s->rebuilds > 0 ? s->candidates / s->rebuilds : NAN) + " candidates/rebuild";
-        if (m == PathMethod::kMsFront && s->steps > 0) notes = format("%.2f", 100 * s->rebuilds / s->steps) + "% front resets";
+          notes = formatCell("%.1f", 100 * s->certified / s->steps) + "% certified, " +
+                  formatCell("%.1f", s->rebuilds > 0 ? s->candidates / s->rebuilds : NAN) + " candidates/rebuild";
+        if (m == PathMethod::kMsFront && s->steps > 0) notes = formatCell("%.2f", 100 * s->rebuilds / s->steps) + "% front resets";
         const bool has_tris = m != PathMethod::kCgalHint && m != PathMethod::kCgalFresh;
         std::fprintf(out, "| %s | %s | %s | %s | %s | %s | %s | %s |\n", mesh.c_str(), v.name, pathMethodName(m),
-                     format("%.0f", ns).c_str(), format("%.0f", 1e9 / ns).c_str(), format("%.2f", warm_ns / ns).c_str(),
-                     has_tris ? format("%.1f", per_step).c_str() : "-", notes.c_str());
+                     formatCell("%.0f", ns).c_str(), formatCell("%.0f", 1e9 / ns).c_str(), formatCell("%.2f", warm_ns / ns).c_str(),
+                     has_tris ? formatCell("%.1f", per_step).c_str() : "-", notes.c_str());
       }
     }
   }
@@ -853,8 +826,8 @@ void printSummary() {
       const Samples* s = findSamples("bounds/" + mesh + "/" + boundsMethodName(m));
       if (!s) continue;
       const double sec = median(s->seconds);
-      std::fprintf(out, "| %s | %s | %s | %s |\n", mesh.c_str(), boundsMethodName(m), format("%.4f", 1e3 * sec).c_str(),
-                   format("%.3f", sec / refit_s).c_str());
+      std::fprintf(out, "| %s | %s | %s | %s |\n", mesh.c_str(), boundsMethodName(m), formatCell("%.4f", 1e3 * sec).c_str(),
+                   formatCell("%.3f", sec / refit_s).c_str());
     }
   }
   std::fprintf(out,
@@ -868,9 +841,9 @@ void printSummary() {
       if (!s) continue;
       const double us = 1e6 * median(s->seconds) / static_cast<double>(s->count);
       const double per_q = s->passes > 0 ? s->triangles / (s->passes * static_cast<double>(s->count)) : NAN;
-      std::fprintf(out, "| %s | %s | %s | %s | %s | %s |\n", mesh.c_str(), deformedMethodName(m), format("%.3f", us).c_str(),
-                   format("%.0f", 1e6 / us).c_str(), format("%.2f", refit_us / us).c_str(),
-                   m != DeformedMethod::kCgalRebuilt ? format("%.1f", per_q).c_str() : "-");
+      std::fprintf(out, "| %s | %s | %s | %s | %s | %s |\n", mesh.c_str(), deformedMethodName(m), formatCell("%.3f", us).c_str(),
+                   formatCell("%.0f", 1e6 / us).c_str(), formatCell("%.2f", refit_us / us).c_str(),
+                   m != DeformedMethod::kCgalRebuilt ? formatCell("%.1f", per_q).c_str() : "-");
     }
   }
   std::fflush(out);

@@ -27,6 +27,7 @@
 // more than S seconds in one run on a pair, that pair's CGAL cases at 1e-5 are skipped, and a
 // case that took more than S is not repeated), --data-dir=PATH. Exit code 77 when a mesh is
 // missing.
+#include "bench/bench_util.h"
 #include "core/hausdorff.h"
 #include "core/mesh.h"
 #include "core/mesh_io.h"
@@ -92,19 +93,6 @@ struct Options {
 
 std::string meshPathOf(const std::string& file) {
   return g_options.data_dir.empty() ? scenes::meshPath(file) : g_options.data_dir + "/" + file + ".off";
-}
-
-std::vector<std::string> splitList(const std::string& s) {
-  std::vector<std::string> out;
-  size_t start = 0;
-  while (start <= s.size()) {
-    const size_t comma = s.find(',', start);
-    const std::string item = s.substr(start, comma == std::string::npos ? std::string::npos : comma - start);
-    if (!item.empty()) out.push_back(item);
-    if (comma == std::string::npos) break;
-    start = comma + 1;
-  }
-  return out;
 }
 
 void parseOwnFlags(int& argc, char** argv) {
@@ -335,13 +323,6 @@ void registerBenchmarks() {
   }
 }
 
-std::string fmt(const char* f, double v) {
-  if (!std::isfinite(v)) return "-";
-  char buffer[64];
-  std::snprintf(buffer, sizeof buffer, f, v);
-  return buffer;
-}
-
 int printSummary() {
   int warnings = 0;
   std::printf("\nSummary: medians of process CPU time per full computation; one thread; ratio = CGAL "
@@ -363,10 +344,10 @@ int printSummary() {
       const bool is_ms = m == Method::kMeshsweeper;
       std::printf("| %s | %zu | %zu | %s | %s | %s | %s | %s | %s | %s | %s |\n", spec->name, f.a.triangles.size(),
                   f.b.triangles.size(), tolName(t).c_str(), methodName(m),
-                  s.skipped ? "skipped" : fmt("%.3f", sec).c_str(),
-                  is_ms ? fmt("%.3f", median(s.build_seconds)).c_str() : "-",
-                  fmt("%.6g", is_ms ? s.lower : s.value).c_str(), fmt("%.6g", is_ms ? s.upper : NAN).c_str(),
-                  fmt("%.4e", s.value / f.diagonal).c_str(), is_ms ? "1.00" : fmt("%.2f", sec / ms_s).c_str());
+                  s.skipped ? "skipped" : formatCell("%.3f", sec).c_str(),
+                  is_ms ? formatCell("%.3f", median(s.build_seconds)).c_str() : "-",
+                  formatCell("%.6g", is_ms ? s.lower : s.value).c_str(), formatCell("%.6g", is_ms ? s.upper : NAN).c_str(),
+                  formatCell("%.4e", s.value / f.diagonal).c_str(), is_ms ? "1.00" : formatCell("%.2f", sec / ms_s).c_str());
       if (!is_ms && ms && std::isfinite(s.value) &&
           !(s.value >= ms->lower - abs_tol && s.value <= ms->upper + abs_tol)) {
         ++warnings;
@@ -381,8 +362,8 @@ int printSummary() {
     if (it == g_samples.end()) continue;
     const Fixture& f = *g_fixtures.at(spec.name);
     std::printf("| %s | %zu | %zu | - | cgal_approx | %s | - | %s | - | %s | - |\n", spec.name, f.a.triangles.size(),
-                f.b.triangles.size(), fmt("%.3f", median(it->second.seconds)).c_str(),
-                fmt("%.6g", it->second.value).c_str(), fmt("%.4e", it->second.value / f.diagonal).c_str());
+                f.b.triangles.size(), formatCell("%.3f", median(it->second.seconds)).c_str(),
+                formatCell("%.6g", it->second.value).c_str(), formatCell("%.4e", it->second.value / f.diagonal).c_str());
   }
   std::printf("\n%s\n", warnings ? "Some CGAL values fall outside Meshsweeper's bounds (see WARNING lines)."
                                   : "Every CGAL bounded value lies within Meshsweeper's [lower, upper] +- tolerance.");

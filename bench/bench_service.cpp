@@ -35,6 +35,7 @@
 // Flags: --quick (10k points, 1 and 4 bodies, 20 steps), --points=a,b  --bodies=a,b
 // --kinds=rigid,deforming  --threads=1,2  --steps=N  --methods=meshsweeper,embree
 // --reach=R (ServiceOptions::reach_steps)  --data-dir=PATH  --broadphase. Exit code 77 when a mesh is missing.
+#include "bench/bench_util.h"
 #include "collision/broadphase.h"
 #include "collision/distance_service.h"
 #include "core/mesh_io.h"
@@ -62,6 +63,8 @@
 namespace meshsweeper::bench {
 namespace {
 
+[[noreturn]] void usageError(const std::string& message) { bench::usageError("bench_service", message); }
+
 using Clock = std::chrono::steady_clock;
 constexpr double kMaxDistance = 0.02;
 constexpr uint32_t kBlock = 128;
@@ -86,19 +89,6 @@ double median(std::vector<double> v) {
   return v.size() % 2 ? v[v.size() / 2] : 0.5 * (v[v.size() / 2 - 1] + v[v.size() / 2]);
 }
 
-std::vector<std::string> splitList(const std::string& s) {
-  std::vector<std::string> out;
-  size_t start = 0;
-  while (start <= s.size()) {
-    const size_t comma = s.find(',', start);
-    const std::string item = s.substr(start, comma == std::string::npos ? std::string::npos : comma - start);
-    if (!item.empty()) out.push_back(item);
-    if (comma == std::string::npos) break;
-    start = comma + 1;
-  }
-  return out;
-}
-
 struct Options {
   std::vector<size_t> points = {10000, 100000};
   std::vector<size_t> bodies = {1, 4, 16};
@@ -110,11 +100,6 @@ struct Options {
   std::string data_dir;
   bool broadphase = false;
 };
-
-[[noreturn]] void usageError(const std::string& message) {
-  std::fprintf(stderr, "bench_service: %s\n", message.c_str());
-  std::exit(2);
-}
 
 std::vector<size_t> parseCounts(const std::string& flag, const std::string& value) {
   std::vector<size_t> out;
