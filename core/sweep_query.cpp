@@ -372,8 +372,47 @@ double QueryStream::depthFirst(const Vec3& p, double start2, double reach, Trian
 // leaves in gathered_ the faces within best + reach of p, at most `capacity` of them (the
 // nearest), in no particular order. Returns the set's reach: every face not kept is at least
 // that far from p.
+namespace {
+
+// Sorts entries [0, n) (n <= kMaxRanked) by squared distance (ties: the order found), keeping the
+// first `keep`; returns the squared distance of the first entry not kept (+inf if none). Ranks by
+// counting (branch-free, vectorised): cheaper than std::sort on these short, unordered lists.
+constexpr size_t kMaxRanked = 2 * (kCoherentSetSize + 1);
+double sortNearest(std::pair<double, TriangleIndex>* entries, size_t n, size_t keep) {
+  assert(n <= kMaxRanked && keep <= kCoherentSetSize);
+  alignas(64) double d[(kMaxRanked + 7) / 8 * 8];
+  for (size_t i = 0; i < n; ++i) d[i] = entries[i].first;
+  for (size_t i = n; i % 8 != 0; ++i) d[i] = kInf;  // padding: never before a finite distance
+  std::pair<double, TriangleIndex> sorted[kCoherentSetSize];
+  double first_out = kInf;
+  for (size_t i = 0; i < n; ++i) {
+    const double di = d[i];
+    uint32_t rank = 0;
+#if defined(__AVX512F__)
+    const __m512d v = _mm512_set1_pd(di);
+    for (size_t j = 0; j < n; j += 8) {
+      const __m512d dj = _mm512_load_pd(d + j);
+      // Equal distances rank by position: lanes j + lane < i only.
+      const size_t before = i > j ? std::min<size_t>(i - j, 8) : 0;
+      const __mmask8 earlier = static_cast<__mmask8>((1u << before) - 1);
+      const __mmask8 ahead = _mm512_cmp_pd_mask(dj, v, _CMP_LT_OQ) |
+                             (_mm512_cmp_pd_mask(dj, v, _CMP_EQ_OQ) & earlier);
+      rank += static_cast<uint32_t>(__builtin_popcount(ahead));
+    }
+#else
+    for (size_t j = 0; j < n; ++j) rank += (d[j] < di) | ((d[j] == di) & (j < i));
+#endif
+    if (rank < keep) sorted[rank] = entries[i];
+    else if (rank == keep) first_out = di;
+  }
+  std::copy(sorted, sorted + std::min(n, keep), entries);
+  return first_out;
+}
+
+}  // namespace
+
 double QueryStream::gatherCandidates(const Vec3& p, double start2, double reach, uint32_t capacity,
-                                     TriangleIndex& best_face) {
+                                     TriangleIndex& best_face, bool sorted) {
   gathered_.clear();
   const double best2 = depthFirst(p, start2, reach, best_face, capacity);
   const double limit = std::sqrt(best2) + reach;
@@ -387,6 +426,14 @@ double QueryStream::gatherCandidates(const Vec3& p, double start2, double reach,
     else outside = std::min(outside, d);
   }
   gathered_.resize(kept);
+  if (sorted) {
+    const double first_out2 = sortNearest(gathered_.data(), kept, capacity);
+    if (kept > capacity) {
+      gathered_.resize(capacity);
+      return std::sqrt(first_out2);
+    }
+    return std::max(std::nextafter(limit, kInf), outside);
+  }
   // If too many were gathered, keep the nearest (a partial selection, not a sort): the reach
   // drops to the first left out.
   if (gathered_.size() > capacity) {
@@ -543,7 +590,7 @@ ClosestPoint QueryStream::closestCoherent(const Vec3& p, CoherentState& state, b
       // Block 0 first; the rest only if they could be closer (or within the cap).
       double exact[8];
       for (uint32_t first = 0; first < state.count; first += 8) {
-        if (first == 8 && state.block_lower[1] - moved > std::min(std::sqrt(best2), within) * (1 + 1e-9)) break;
+        if (first > 0 && state.block_lower[first / 8] - moved > std::min(std::sqrt(best2), within) * (1 + 1e-9)) break;
         const uint32_t lanes = std::min<uint32_t>(8, state.count - first);
         for (uint32_t lane = 0; lane < 8; ++lane) {
           const Triangle& t = mesh.triangles[state.faces[first + (lane < lanes ? lane : 0)]];
@@ -580,9 +627,9 @@ ClosestPoint QueryStream::closestCoherent(const Vec3& p, CoherentState& state, b
       // A stationary point still gets a certificate: a reach of at least 1e-6 of the mesh size.
       const double reach = 2.0 * std::max(static_cast<double>(state.reach_steps) * state.mean_step,
                                           1e-6 / g.box_scale);
-      const double set_reach = gatherCandidates(p, start2, reach, kCoherentSetSize, face);
-      // Block 0 first: the rest are tested only when needed.
-      orderIntoBlocks(state.block_lower, kCoherentSetSize / 8);
+      const double set_reach = gatherCandidates(p, start2, reach, kCoherentSetSize, face, true);
+      for (uint32_t b = 0; b < kCoherentSetSize / 8; ++b)
+        state.block_lower[b] = 8 * b < gathered_.size() ? std::nextafter(static_cast<float>(std::sqrt(gathered_[8 * b].first)), 0.0f) : kFloatInf;
       state.count = static_cast<uint32_t>(gathered_.size());
       for (uint32_t i = 0; i < state.count; ++i) state.faces[i] = gathered_[i].second;
       state.anchor = p;

@@ -186,7 +186,7 @@ class QueryStream {
   uint32_t testLeaf(int32_t leaf, const Vec3& p, double out[8]);
   TriangleHit hitOn(TriangleIndex face, const Vec3& p) const;
   double gatherCandidates(const Vec3& p, double start2, double reach, uint32_t capacity,
-                          TriangleIndex& best_face);
+                          TriangleIndex& best_face, bool sorted = false);
   void orderIntoBlocks(float* block_lower, size_t blocks);
   double depthFirst(const Vec3& p, double start2, double reach, TriangleIndex& best_face,
                     uint32_t capacity = 0);
