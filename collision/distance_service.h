@@ -168,10 +168,10 @@ struct ServiceOptions {
   unsigned threads = 0;
   // Points per parallel task (fixed for the service's life; results never depend on it).
   uint32_t block_size = 128;
-  // Coherent states of rigid bodies gather candidates within d + 2 R, R = reach_steps times the
-  // point's mean step (CoherentState::reach_steps): larger means fewer rebuilds but larger
-  // sets. Deforming and key-framed bodies use 0 (their geometry changes every step, which
-  // drops the set anyway). Answers never depend on it.
+  // Coherent states gather candidates within d + 2 R, R = reach_steps times the point's mean
+  // step relative to the body (CoherentState::reach_steps; for key-framed and deforming bodies
+  // the step includes how far the faces moved): larger means fewer rebuilds but larger sets.
+  // Answers never depend on it.
   float reach_steps = 2;
 };
 
@@ -234,6 +234,11 @@ class DistanceService {
   PositionsUpdate setPositions(BodyHandle body, const std::vector<Vec3>& positions);
   // kDeforming: changes the displacement bound and re-anchors at the current positions.
   void setDisplacementBound(BodyHandle body, double displacement_bound);
+  // kDeforming: whether the body keeps inline faces (DeformingBody::setInlineFaces). Each
+  // setPositions() decides it from the last step's work on the body: on when its queries
+  // tested at least 2.5 leaf blocks per leaf block of its hierarchy (a cloth draped over it),
+  // off for a body few points reach. Answers never depend on it.
+  bool inlineFaces(BodyHandle body) const;
   // kKeyframed, kDeforming: the current world positions [vertex].
   const std::vector<Vec3>& positions(BodyHandle body) const;
   // The body's world box: rigid, its rest box's 8 corners transformed (with a 1e-12 relative

@@ -219,6 +219,23 @@ TreeGeometry Hierarchy::restGeometry() const {
   return g;
 }
 
+void fillLeafBlocks(const Hierarchy& h, const Vec3* positions, std::vector<TriangleBlock8>& blocks) {
+  const Mesh& mesh = h.mesh();
+  const TriangleIndex* lanes = h.leafTriangles().data();
+  blocks.resize(h.leafCount());
+  for (uint32_t leaf = 0; leaf < blocks.size(); ++leaf) {
+    TriangleBlock8& block = blocks[leaf];
+    const TriangleIndex* faces = lanes + 8 * static_cast<size_t>(leaf);
+    for (uint32_t lane = 0; lane < 8; ++lane) {
+      const TriangleIndex f = faces[faces[lane] != kInvalidIndex ? lane : 0];  // unused: lane 0
+      for (int k = 0; k < 3; ++k) {
+        const Vec3& x = positions[mesh.triangles[f][k]];
+        for (int axis = 0; axis < 3; ++axis) block.v[k][axis][lane] = x[axis];
+      }
+    }
+  }
+}
+
 std::string validate(const Hierarchy& h) {
   const Mesh& mesh = h.mesh();
   const auto& nodes = h.nodes();
@@ -315,6 +332,18 @@ std::string validateGeometry(const Hierarchy& h, const TreeGeometry& g) {
         }
       }
     }
+  }
+  // Inline faces, when the geometry has them: each used lane holds its face at the positions.
+  if (g.leaf_blocks) {
+    for (uint32_t leaf = 0; leaf < h.leafCount(); ++leaf)
+      for (uint32_t lane = 0; lane < 8; ++lane) {
+        const TriangleIndex f = lanes[8 * leaf + (lane < h.leafLanes(leaf) ? lane : 0)];
+        for (int k = 0; k < 3; ++k)
+          for (int axis = 0; axis < 3; ++axis)
+            if (!(g.leaf_blocks[leaf].v[k][axis][lane] == positions[mesh.triangles[f][k]][axis]))
+              return "leaf " + std::to_string(leaf) + " lane " + std::to_string(lane) +
+                     " holds stale coordinates for face " + std::to_string(f);
+      }
   }
   return {};
 }

@@ -160,6 +160,10 @@ struct LeafVertices {
 };
 LeafVertices leafVertices(const Hierarchy& h);
 
+// Fills `blocks` (resized to h.leafCount()) with each leaf block's faces at `positions` (one
+// per mesh vertex), laid out as Hierarchy::leafBlocks(): moving geometry with inline faces.
+void fillLeafBlocks(const Hierarchy& h, const Vec3* positions, std::vector<TriangleBlock8>& blocks);
+
 // How far each slot's bounds can be pushed when every vertex v moves at most w[v] (w >= 0,
 // one per mesh vertex; DESIGN.md section 3), per slot [8 * node + slot]: `subtree` = the largest
 // w among the slot's subtree vertices (its box grows by that), `corners` = the largest w among
@@ -175,7 +179,8 @@ float boxMargin(double extent);
 
 // Checks that the bounds of `geometry` (over h's layout) hold for its positions: every slot's
 // box contains its subtree's vertices and every eps bounds their distance to the slot's
-// triangle. Returns an empty string when valid, else the first violation.
+// triangle; inline leaf blocks (if any) hold the faces at the positions. Returns an empty string
+// when valid, else the first violation.
 std::string validateGeometry(const Hierarchy& h, const TreeGeometry& geometry);
 
 // Checks the hierarchy's invariants: every original face appears in exactly one leaf lane;

@@ -48,6 +48,22 @@ DeformingBody::DeformingBody(std::shared_ptr<const Hierarchy> hierarchy)
   geometry_.lineage = geometry_.version;
 }
 
+void DeformingBody::setInlineFaces(bool on) {
+  if (on == inlineFaces()) return;
+  if (on) {
+    fillLeafBlocks(*hierarchy_, positions_.data(), leaf_blocks_);
+    geometry_.leaf_blocks = leaf_blocks_.data();
+  } else {
+    geometry_.leaf_blocks = nullptr;
+    leaf_blocks_.clear();
+    leaf_blocks_.shrink_to_fit();
+  }
+}
+
+void DeformingBody::refreshInlineFaces() {
+  if (inlineFaces()) fillLeafBlocks(*hierarchy_, positions_.data(), leaf_blocks_);
+}
+
 void DeformingBody::checkSize(size_t count, const char* what) const {
   if (count != positions_.size())
     throw std::invalid_argument(std::string("DeformingBody: ") + what + " has " + std::to_string(count) +
@@ -65,6 +81,7 @@ void DeformingBody::anchor(const std::vector<Vec3>& positions) {
   refitBounds(*hierarchy_, anchor_positions_.data(), anchor_nodes_, true);
   anchor_extent_ = boxExtent(anchor_nodes_);
   nodes_ = anchor_nodes_;
+  refreshInlineFaces();
   std::fill(delta_.begin(), delta_.end(), 0.0);
   geometry_.version = nextGeometryVersion();
   geometry_.lineage = geometry_.version;  // positions replaced: coherent state starts over
@@ -125,6 +142,7 @@ void DeformingBody::inflate(const std::vector<double>& delta) {
   // Current positions outside the new bounds fall back to the anchor positions.
   if (outside) {
     positions_ = anchor_positions_;
+    refreshInlineFaces();
     geometry_.lineage = nextGeometryVersion();  // positions replaced: coherent state starts over
   }
   geometry_.version = nextGeometryVersion();
@@ -160,6 +178,7 @@ DisplacementCheck DeformingBody::setPositions(const std::vector<Vec3>& positions
   }
   if (!check.accepted) return check;
   positions_ = positions;
+  refreshInlineFaces();
   geometry_.version = nextGeometryVersion();
   geometry_.drift += std::sqrt(moved2) * (1 + 1e-12);
   return check;

@@ -425,14 +425,16 @@ void checkBody(const Mesh& rest, const std::shared_ptr<const Hierarchy>& h, cons
   checkFreshQueries(now, stream, queryPoints(now, points, points / 4 + 1, 2, seed), checks);
 }
 
-void checkInflated(const Mesh& mesh, size_t points, size_t path_steps, uint64_t seed) {
+void checkInflated(const Mesh& mesh, size_t points, size_t path_steps, uint64_t seed, bool inline_faces) {
   const auto h = Hierarchy::build(mesh);
   const double diagonal = meshDiagonal(mesh);
   const double delta = 0.01 * diagonal;
   DeformingBody body(h);
+  body.setInlineFaces(inline_faces);
+  CHECK(body.inlineFaces() == inline_faces);
   QueryChecks checks;
   Failures bounds("validateGeometry");
-  INFO("mesh " << mesh.name);
+  INFO("mesh " << mesh.name << (inline_faces ? ", inline faces" : ", faces gathered from the positions"));
   {
     INFO("fresh body (rest positions, no inflation)");
     checkBody(mesh, h, body, points, seed, checks, bounds);
@@ -660,9 +662,11 @@ TEST_CASE("key frames: bad frames throw", "[deform][keyframe]") {
 TEST_CASE("inflated bounds: displacements within the bounds are exact, others refused", "[deform][inflated]") {
   const Mesh* armadillo = realMesh("armadillo");
   REQUIRE(armadillo);
-  checkInflated(*armadillo, 10, 80, 0xbeef01);
-  checkInflated(scenes::torus(1.0, 0.3, 96, 48), 30, 200, 0xbeef02);
-  checkInflated(scenes::randomSoup(2000, 9), 30, 200, 0xbeef03);
+  checkInflated(*armadillo, 10, 80, 0xbeef01, false);
+  checkInflated(*armadillo, 10, 80, 0xbeef04, true);
+  checkInflated(scenes::torus(1.0, 0.3, 96, 48), 30, 200, 0xbeef02, true);
+  checkInflated(scenes::randomSoup(2000, 9), 30, 200, 0xbeef03, false);
+  checkInflated(scenes::randomSoup(2000, 10), 30, 200, 0xbeef05, true);
 }
 
 TEST_CASE("inflated bounds: bad input throws and changes nothing", "[deform][inflated]") {
@@ -706,6 +710,44 @@ TEST_CASE("inflated bounds: bad input throws and changes nothing", "[deform][inf
   QueryChecks checks;
   const Mesh now = withPositions(mesh, moved);
   checkFreshQueries(now, stream, queryPoints(now, 40, 10, 4, 5), checks);
+}
+
+// Deforming bodies keep inline leaf blocks (the faces at the current positions) so queries
+// test them like rigid ones; validateGeometry checks them, and notices stale ones.
+TEST_CASE("inflated bounds: inline leaf blocks follow the positions", "[deform][inflated]") {
+  const Mesh mesh = scenes::torus(1.0, 0.3, 48, 24);
+  const auto h = Hierarchy::build(mesh);
+  DeformingBody body(h);
+  CHECK_FALSE(body.inlineFaces());
+  CHECK(body.geometry().leaf_blocks == nullptr);
+  body.setInlineFaces(true);
+  REQUIRE(body.geometry().leaf_blocks != nullptr);
+  CHECK(validateGeometry(*h, body.geometry()) == "");
+  body.inflate(0.05);
+  const std::vector<Vec3> moved = wave(mesh, 0.04, 3, Vec3(0.3, 0.2, 1).normalized(), 0.7);
+  REQUIRE(body.setPositions(moved).accepted);
+  CHECK(validateGeometry(*h, body.geometry()) == "");
+  CHECK(body.geometry().leaf_blocks[0].v[0][0][0] != h->leafBlocks()[0].v[0][0][0]);
+  // The same bounds and positions with the rest's inline faces: stale, and said so.
+  TreeGeometry stale = body.geometry();
+  stale.leaf_blocks = h->leafBlocks().data();
+  CHECK(validateGeometry(*h, stale).find("stale coordinates") != std::string::npos);
+  // A refused step keeps the previous blocks; re-anchoring refreshes them.
+  std::vector<Vec3> far = moved;
+  far[7] += Vec3(1, 0, 0);
+  CHECK_FALSE(body.setPositions(far).accepted);
+  CHECK(validateGeometry(*h, body.geometry()) == "");
+  body.anchor(far);
+  CHECK(validateGeometry(*h, body.geometry()) == "");
+  body.inflate(0.001);  // the current positions are the anchor's: kept
+  CHECK(validateGeometry(*h, body.geometry()) == "");
+  // Off and on again: gathered, then refilled at the current positions.
+  body.setInlineFaces(false);
+  CHECK(body.geometry().leaf_blocks == nullptr);
+  CHECK(validateGeometry(*h, body.geometry()) == "");
+  REQUIRE(body.setPositions(add(far, std::vector<Vec3>(far.size(), Vec3(0, 0, 1e-4)))).accepted);
+  body.setInlineFaces(true);
+  CHECK(validateGeometry(*h, body.geometry()) == "");
 }
 
 // Geometry versions are unique in the process: a caller-held CoherentState that moves from one

@@ -322,7 +322,7 @@ TEST_CASE("service equals brute force step by step, rigid, key-framed and deform
   Failures closest("closest vs brute force"), within("within vs brute force"), identical("1 vs 2 threads");
   StepResult r1, r2;
   uint64_t certified = 0, warm = 0, out_of_reach = 0;
-  size_t reanchored = 0;
+  size_t reanchored = 0, inline_steps = 0;
   const int steps = 7;
   for (int s = 0; s < steps; ++s) {
     INFO("step " << s);
@@ -332,6 +332,10 @@ TEST_CASE("service equals brute force step by step, rigid, key-framed and deform
     twin.setTime(b_key, 0.33 * s);
     const PositionsUpdate u = twin.setPositions(b_deform, wave(torus_rest, deform_center, 0.004 * s * s, 0.3 * s));
     reanchored += u.reanchored;
+    // Off before any work; then chosen from the last step's (answers must not change).
+    CHECK(twin.one.inlineFaces(b_deform) == twin.two.inlineFaces(b_deform));
+    if (s == 0) CHECK_FALSE(twin.one.inlineFaces(b_deform));
+    inline_steps += twin.one.inlineFaces(b_deform);
     if (s == 3) {
       // Remove a body mid-run; its slot is reused by a new body with a new generation.
       const BodyHandle old_torus = b_torus;
@@ -371,6 +375,7 @@ TEST_CASE("service equals brute force step by step, rigid, key-framed and deform
   CHECK(certified > 0);
   CHECK(out_of_reach > 0);  // pairs with nothing within d were answered (and the answers still match)
   CHECK(reanchored > 0);  // the deformation outgrew its bound at least once
+  CHECK(inline_steps > 0);  // the deforming body was queried both ways
   CHECK(closest.checks() > 1000);
   CHECK(within.checks() > 1000);
 }
