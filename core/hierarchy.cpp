@@ -236,6 +236,46 @@ void fillLeafBlocks(const Hierarchy& h, const Vec3* positions, std::vector<Trian
   }
 }
 
+void refitBoxes(const Hierarchy& h, const TriangleBlock8* blocks, double extent, std::vector<Node8>& nodes) {
+  const double scale = h.boxScale();
+  const Vec3& center = h.center();
+  const float margin = boxMargin(extent);
+  // Children first: a child node always has a larger index than its parent.
+  for (size_t node = nodes.size(); node-- > 0;) {
+    Node8& n = nodes[node];
+    for (int k = 0; k < 8; ++k) {
+      const ChildRef c = n.child[k];
+      if (c == kEmptyChild) continue;
+      if (isLeafRef(c)) {
+        // Unused lanes copy a used one, so all 8 lanes of each corner count.
+        const TriangleBlock8& b = blocks[leafIndex(c)];
+        for (int axis = 0; axis < 3; ++axis) {
+          double low = b.v[0][axis][0], high = low;
+          for (int corner = 0; corner < 3; ++corner)
+            for (int lane = 0; lane < 8; ++lane) {
+              low = std::min(low, b.v[corner][axis][lane]);
+              high = std::max(high, b.v[corner][axis][lane]);
+            }
+          n.lower[axis][k] = floatBelow((low - center[axis]) * scale) - margin;
+          n.upper[axis][k] = floatAbove((high - center[axis]) * scale) + margin;
+        }
+      } else {
+        const Node8& child = nodes[c];
+        for (int axis = 0; axis < 3; ++axis) {
+          float lo = std::numeric_limits<float>::infinity(), hi = -lo;
+          for (int j = 0; j < 8; ++j) {
+            if (child.child[j] == kEmptyChild) continue;
+            lo = std::min(lo, child.lower[axis][j]);
+            hi = std::max(hi, child.upper[axis][j]);
+          }
+          n.lower[axis][k] = lo;
+          n.upper[axis][k] = hi;
+        }
+      }
+    }
+  }
+}
+
 std::string validate(const Hierarchy& h) {
   const Mesh& mesh = h.mesh();
   const auto& nodes = h.nodes();

@@ -164,6 +164,12 @@ LeafVertices leafVertices(const Hierarchy& h);
 // per mesh vertex), laid out as Hierarchy::leafBlocks(): moving geometry with inline faces.
 void fillLeafBlocks(const Hierarchy& h, const Vec3* positions, std::vector<TriangleBlock8>& blocks);
 
+// Rewrites every slot's box in `nodes` (over h's layout) as the box of its subtree's faces in
+// `blocks` (one per leaf, as fillLeafBlocks leaves them), rounded outward, widened by
+// boxMargin(extent); `extent` must bound the faces' largest |scaled coordinate|. One bottom-up
+// pass reading only the blocks; eps and the rest of each node are kept.
+void refitBoxes(const Hierarchy& h, const TriangleBlock8* blocks, double extent, std::vector<Node8>& nodes);
+
 // How far each slot's bounds can be pushed when every vertex v moves at most w[v] (w >= 0,
 // one per mesh vertex; DESIGN.md section 3), per slot [8 * node + slot]: `subtree` = the largest
 // w among the slot's subtree vertices (its box grows by that), `corners` = the largest w among

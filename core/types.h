@@ -18,5 +18,8 @@ inline constexpr uint32_t kInvalidIndex = 0xffffffffu;
 // A float no smaller than x >= 0, without a branch: x is raised by more than rounding to float
 // can take off (2^-24 relative for normal floats, 2^-150 absolute below them).
 inline float floatAtLeast(double x) { return static_cast<float>(x * (1 + 0x1p-23) + 0x1p-148); }
+// The same for any sign: a float no smaller (floatAbove) or no larger (floatBelow) than x.
+inline float floatAbove(double x) { return static_cast<float>(x + (x < 0 ? -x : x) * 0x1p-23 + 0x1p-148); }
+inline float floatBelow(double x) { return static_cast<float>(x - (x < 0 ? -x : x) * 0x1p-23 - 0x1p-148); }
 
 }  // namespace meshsweeper

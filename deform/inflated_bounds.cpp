@@ -35,6 +35,8 @@ DeformingBody::DeformingBody(std::shared_ptr<const Hierarchy> hierarchy)
   const Hierarchy& h = *hierarchy_;
   anchor_nodes_ = h.nodes();
   anchor_extent_ = boxExtent(anchor_nodes_);
+  extent_bound_ = anchor_extent_;
+  inflated_nodes_ = anchor_nodes_;
   nodes_ = anchor_nodes_;
   anchor_positions_ = h.mesh().positions;
   positions_ = anchor_positions_;
@@ -51,17 +53,24 @@ DeformingBody::DeformingBody(std::shared_ptr<const Hierarchy> hierarchy)
 void DeformingBody::setInlineFaces(bool on) {
   if (on == inlineFaces()) return;
   if (on) {
-    fillLeafBlocks(*hierarchy_, positions_.data(), leaf_blocks_);
+    leaf_blocks_.resize(hierarchy_->leafCount());  // at least one leaf: never null
     geometry_.leaf_blocks = leaf_blocks_.data();
+    refreshInlineFaces();
   } else {
     geometry_.leaf_blocks = nullptr;
     leaf_blocks_.clear();
     leaf_blocks_.shrink_to_fit();
+    nodes_ = inflated_nodes_;  // the tight boxes held only for the current positions
   }
 }
 
+// Inline faces at the current positions, and boxes refitted to them (the inflated boxes are
+// valid for any positions within the bounds; these are tighter, so fewer leaves are opened).
+// The current positions lie within the inflated boxes, so extent_bound_ bounds their extent.
 void DeformingBody::refreshInlineFaces() {
-  if (inlineFaces()) fillLeafBlocks(*hierarchy_, positions_.data(), leaf_blocks_);
+  if (!inlineFaces()) return;
+  fillLeafBlocks(*hierarchy_, positions_.data(), leaf_blocks_);
+  refitBoxes(*hierarchy_, leaf_blocks_.data(), extent_bound_, nodes_);
 }
 
 void DeformingBody::checkSize(size_t count, const char* what) const {
@@ -80,6 +89,8 @@ void DeformingBody::anchor(const std::vector<Vec3>& positions) {
   anchor_nodes_ = hierarchy_->nodes();
   refitBounds(*hierarchy_, anchor_positions_.data(), anchor_nodes_, true);
   anchor_extent_ = boxExtent(anchor_nodes_);
+  extent_bound_ = anchor_extent_;
+  inflated_nodes_ = anchor_nodes_;
   nodes_ = anchor_nodes_;
   refreshInlineFaces();
   std::fill(delta_.begin(), delta_.end(), 0.0);
@@ -113,7 +124,7 @@ void DeformingBody::inflate(const std::vector<double>& delta) {
   float largest_grow = 0;
   for (size_t node = 0; node < anchor_nodes_.size(); ++node) {
     const Node8& a = anchor_nodes_[node];
-    Node8& out = nodes_[node];
+    Node8& out = inflated_nodes_[node];
     out = a;
     for (int k = 0; k < 8; ++k) {
       if (a.child[k] == kEmptyChild) continue;
@@ -131,7 +142,7 @@ void DeformingBody::inflate(const std::vector<double>& delta) {
   // the new extent: the anchor's plus the largest growth).
   const float margin = boxMargin(anchor_extent_ + largest_grow) - boxMargin(1.0);
   if (margin > 0) {
-    for (Node8& n : nodes_)
+    for (Node8& n : inflated_nodes_)
       for (int axis = 0; axis < 3; ++axis)
         for (int k = 0; k < 8; ++k) {
           n.lower[axis][k] -= margin;
@@ -139,12 +150,14 @@ void DeformingBody::inflate(const std::vector<double>& delta) {
         }
   }
   delta_ = delta;
+  extent_bound_ = anchor_extent_ + largest_grow;
+  nodes_ = inflated_nodes_;
   // Current positions outside the new bounds fall back to the anchor positions.
   if (outside) {
     positions_ = anchor_positions_;
-    refreshInlineFaces();
     geometry_.lineage = nextGeometryVersion();  // positions replaced: coherent state starts over
   }
+  refreshInlineFaces();
   geometry_.version = nextGeometryVersion();
 }
 

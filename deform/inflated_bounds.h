@@ -43,7 +43,8 @@ class DeformingBody {
 
   // Inline faces: keep a copy of every leaf block's faces at the current positions, as the
   // rigid hierarchy has (Hierarchy::leafBlocks()), so a query tests a leaf without gathering
-  // its corners. Costs a pass over the faces in each setPositions (about 10 ns a face) and
+  // its corners, and refit the boxes to them (tighter than the inflated ones: fewer leaves
+  // opened; the radii stay inflated). Costs a pass over the faces in each setPositions and
   // 72 bytes a face; pays off for a body that many points query each step (the service turns
   // it on by that measure). Off by default; turning it on fills the blocks at once.
   void setInlineFaces(bool on);
@@ -59,7 +60,10 @@ class DeformingBody {
   void checkSize(size_t count, const char* what) const;
   std::shared_ptr<const Hierarchy> hierarchy_;
   std::vector<Node8> anchor_nodes_;     // exact bounds at the anchor positions
-  std::vector<Node8> nodes_;            // inflated bounds
+  std::vector<Node8> inflated_nodes_;   // inflated bounds: hold for any positions within delta_
+  std::vector<Node8> nodes_;            // what queries read: inflated_nodes_, or with inline
+                                        // faces the same with boxes refitted to positions_
+  double extent_bound_ = 0;             // bounds the largest |scaled coordinate| of positions_
   std::vector<Vec3> anchor_positions_;  // [vertex]
   std::vector<Vec3> positions_;         // [vertex] current
   std::vector<double> delta_;           // [vertex] displacement bounds

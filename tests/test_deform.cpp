@@ -727,6 +727,22 @@ TEST_CASE("inflated bounds: inline leaf blocks follow the positions", "[deform][
   const std::vector<Vec3> moved = wave(mesh, 0.04, 3, Vec3(0.3, 0.2, 1).normalized(), 0.7);
   REQUIRE(body.setPositions(moved).accepted);
   CHECK(validateGeometry(*h, body.geometry()) == "");
+  // The boxes are refitted to the positions: tighter than the inflated ones (off: inflated).
+  auto box_sum = [&](const TreeGeometry& g) {
+    double sum = 0;
+    for (size_t node = 0; node < h->nodes().size(); ++node)
+      for (int k = 0; k < 8; ++k)
+        if (g.nodes[node].child[k] != kEmptyChild)
+          for (int axis = 0; axis < 3; ++axis) sum += g.nodes[node].upper[axis][k] - g.nodes[node].lower[axis][k];
+    return sum;
+  };
+  const double tight = box_sum(body.geometry());
+  body.setInlineFaces(false);
+  const double inflated = box_sum(body.geometry());
+  CHECK(tight < 0.9 * inflated);
+  CHECK(validateGeometry(*h, body.geometry()) == "");
+  body.setInlineFaces(true);
+  CHECK(box_sum(body.geometry()) == tight);
   CHECK(body.geometry().leaf_blocks[0].v[0][0][0] != h->leafBlocks()[0].v[0][0][0]);
   // The same bounds and positions with the rest's inline faces: stale, and said so.
   TreeGeometry stale = body.geometry();

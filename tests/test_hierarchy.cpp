@@ -669,3 +669,29 @@ TEST_CASE("hierarchy: refitted radii are the exact maxima over each subtree", "[
     }
   }
 }
+
+// The float roundings that keep float boxes and radii conservative: never on the wrong side of
+// the double they stand for, at any sign and magnitude (normal, subnormal, zero), and within a
+// few float ulps of it.
+TEST_CASE("float roundings: floatAtLeast, floatAbove, floatBelow", "[hierarchy]") {
+  Random random(41);
+  size_t checked = 0;
+  for (int i = 0; i < 50000; ++i) {
+    const double magnitude = std::ldexp(random.uniform(0.5, 1.0), static_cast<int>(random.uniform(-160, 120)));
+    const double x = i % 2 ? magnitude : -magnitude;
+    const float above = floatAbove(x), below = floatBelow(x);
+    REQUIRE(static_cast<double>(above) >= x);
+    REQUIRE(static_cast<double>(below) <= x);
+    // Within a few float ulps: 2^-21 relative, 2^-146 absolute (subnormal floats).
+    const double slack = std::abs(x) * 0x1p-21 + 0x1p-146;
+    REQUIRE(static_cast<double>(above) - x <= slack);
+    REQUIRE(x - static_cast<double>(below) <= slack);
+    if (x >= 0) REQUIRE(static_cast<double>(floatAtLeast(x)) >= x);
+    ++checked;
+  }
+  for (double x : {0.0, -0.0, 1e-300, -1e-300, 1.0, -1.0, 0x1p-149, -0x1p-149}) {
+    CHECK(static_cast<double>(floatAbove(x)) >= x);
+    CHECK(static_cast<double>(floatBelow(x)) <= x);
+  }
+  CHECK(checked == 50000);
+}
