@@ -18,14 +18,16 @@
 // normals and a twist, every vertex moves; t advances through [0, 1]):
 //   bounds/MESH/METHOD   one iteration = one frame: ms_kf_bounds (KeyframeBody::interpolateBounds),
 //     ms_kf_settime (setTime: bounds and positions), ms_setpositions (DeformingBody::setPositions,
-//     the per-step check), ms_inflate (DeformingBody::inflate with per-vertex bounds),
+//     the per-step check), ms_setpositions_inline (the same with inline faces: the check, the
+//     leaf blocks refreshed and the boxes refitted), ms_inflate (DeformingBody::inflate with per-vertex bounds),
 //     embree_refit (rtcCommitGeometry + rtcCommitScene of a DYNAMIC / LOW / REFIT scene after
 //     new vertices; writing the buffer is not timed), embree_build (a fresh default-quality
 //     scene, for reference: what a rebuild costs), cgal_rebuild (tree.rebuild +
 //     accelerate_distance_queries), ms_build (Hierarchy::build of the deformed mesh).
 //   deformed/MESH/METHOD one iteration = fresh closest-point queries for every point of a set of
 //     near-surface points of the mesh deformed at t = 0.5: ms_keyframe (through KeyframeBody's
-//     geometry), ms_inflated (DeformingBody, per-vertex bounds), ms_rebuilt (a hierarchy built
+//     geometry), ms_inflated (DeformingBody, per-vertex bounds), ms_inflated_inline (the same
+//     with inline faces and refitted boxes), ms_rebuilt (a hierarchy built
 //     on the deformed mesh), embree_refit, embree_rebuilt, cgal_rebuilt.
 //
 // Before timing, every method is checked on every point of every path and query set (brute
@@ -233,15 +235,19 @@ const char* pathMethodName(PathMethod m) {
   return "?";
 }
 
-enum class BoundsMethod { kKfBounds, kKfSetTime, kSetPositions, kInflate, kEmbreeRefit, kEmbreeBuild, kCgalRebuild, kMsBuild };
+enum class BoundsMethod {
+  kKfBounds, kKfSetTime, kSetPositions, kSetPositionsInline, kInflate, kEmbreeRefit, kEmbreeBuild, kCgalRebuild, kMsBuild
+};
 const BoundsMethod kBoundsMethods[] = {BoundsMethod::kKfBounds,    BoundsMethod::kKfSetTime,   BoundsMethod::kSetPositions,
-                                       BoundsMethod::kInflate,     BoundsMethod::kEmbreeRefit, BoundsMethod::kEmbreeBuild,
+                                       BoundsMethod::kSetPositionsInline, BoundsMethod::kInflate,
+                                       BoundsMethod::kEmbreeRefit, BoundsMethod::kEmbreeBuild,
                                        BoundsMethod::kCgalRebuild, BoundsMethod::kMsBuild};
 const char* boundsMethodName(BoundsMethod m) {
   switch (m) {
     case BoundsMethod::kKfBounds: return "ms_kf_bounds";
     case BoundsMethod::kKfSetTime: return "ms_kf_settime";
     case BoundsMethod::kSetPositions: return "ms_setpositions";
+    case BoundsMethod::kSetPositionsInline: return "ms_setpositions_inline";
     case BoundsMethod::kInflate: return "ms_inflate";
     case BoundsMethod::kEmbreeRefit: return "embree_refit";
     case BoundsMethod::kEmbreeBuild: return "embree_build";
@@ -251,14 +257,16 @@ const char* boundsMethodName(BoundsMethod m) {
   return "?";
 }
 
-enum class DeformedMethod { kMsKeyframe, kMsInflated, kMsRebuilt, kEmbreeRefit, kEmbreeRebuilt, kCgalRebuilt };
+enum class DeformedMethod { kMsKeyframe, kMsInflated, kMsInflatedInline, kMsRebuilt, kEmbreeRefit, kEmbreeRebuilt, kCgalRebuilt };
 const DeformedMethod kDeformedMethods[] = {DeformedMethod::kMsKeyframe, DeformedMethod::kMsInflated,
+                                           DeformedMethod::kMsInflatedInline,
                                            DeformedMethod::kMsRebuilt,  DeformedMethod::kEmbreeRefit,
                                            DeformedMethod::kEmbreeRebuilt, DeformedMethod::kCgalRebuilt};
 const char* deformedMethodName(DeformedMethod m) {
   switch (m) {
     case DeformedMethod::kMsKeyframe: return "ms_keyframe";
     case DeformedMethod::kMsInflated: return "ms_inflated";
+    case DeformedMethod::kMsInflatedInline: return "ms_inflated_inline";
     case DeformedMethod::kMsRebuilt: return "ms_rebuilt";
     case DeformedMethod::kEmbreeRefit: return "embree_refit";
     case DeformedMethod::kEmbreeRebuilt: return "embree_rebuilt";
@@ -322,13 +330,14 @@ struct DeformFixture {
   std::vector<double> delta;                      // [vertex] |deformed - rest|: bound for any t
   std::unique_ptr<KeyframeBody> keyframe;
   std::unique_ptr<DeformingBody> deforming;
+  std::unique_ptr<DeformingBody> deforming_inline;  // the same with inline faces
   std::unique_ptr<EmbreeRefitScene> refit;
   std::unique_ptr<CgalHintedClosest> cgal;
   // At t = 0.5:
   Mesh half;                                      // the deformed mesh
   std::vector<Vec3> points;                       // near-surface query points
   std::shared_ptr<const Hierarchy> rebuilt;
-  std::unique_ptr<QueryStream> keyframe_stream, inflated_stream, rebuilt_stream;
+  std::unique_ptr<QueryStream> keyframe_stream, inflated_stream, inflated_inline_stream, rebuilt_stream;
   std::unique_ptr<EmbreeClosest> embree_rebuilt;
 };
 
@@ -417,6 +426,7 @@ void verifyDeformed(DeformFixture& d) {
     std::vector<std::pair<std::string, double>> answers;
     answers.emplace_back("ms_keyframe", d.keyframe_stream->closest(p).distance);
     answers.emplace_back("ms_inflated", d.inflated_stream->closest(p).distance);
+    answers.emplace_back("ms_inflated_inline", d.inflated_inline_stream->closest(p).distance);
     answers.emplace_back("ms_rebuilt", d.rebuilt_stream->closest(p).distance);
     answers.emplace_back("embree_refit", d.refit->closest(p).distance);
     answers.emplace_back("embree_rebuilt", d.embree_rebuilt->closest(p).distance);
@@ -426,7 +436,7 @@ void verifyDeformed(DeformFixture& d) {
     for (const auto& a : answers) lo = std::min(lo, a.second), hi = std::max(hi, a.second);
     if (!agree(lo, hi, diagonal)) disagree(d.name + ", deformed at t = 0.5, point " + std::to_string(i), p, answers);
   }
-  std::fprintf(stderr, "[%s] deformed (t = 0.5): %zu points agree across 6 methods (+ brute force every 199th) (%.1f s)\n",
+  std::fprintf(stderr, "[%s] deformed (t = 0.5): %zu points agree across 7 methods (+ brute force every 199th) (%.1f s)\n",
                d.name.c_str(), d.points.size(), secondsSince(start));
 }
 
@@ -461,6 +471,9 @@ DeformFixture& deformFixture(const std::string& name) {
     d.keyframe = std::make_unique<KeyframeBody>(base.hierarchy, std::vector<std::vector<Vec3>>{d.rest, d.deformed});
     d.deforming = std::make_unique<DeformingBody>(base.hierarchy);
     d.deforming->inflate(d.delta);
+    d.deforming_inline = std::make_unique<DeformingBody>(base.hierarchy);
+    d.deforming_inline->inflate(d.delta);
+    d.deforming_inline->setInlineFaces(true);
     d.refit = std::make_unique<EmbreeRefitScene>(mesh);
     d.cgal = std::make_unique<CgalHintedClosest>(mesh);
 
@@ -473,6 +486,8 @@ DeformFixture& deformFixture(const std::string& name) {
     d.keyframe_stream->setGeometry(&d.keyframe->geometry());
     d.inflated_stream = std::make_unique<QueryStream>(base.hierarchy);
     d.inflated_stream->setGeometry(&d.deforming->geometry());
+    d.inflated_inline_stream = std::make_unique<QueryStream>(base.hierarchy);
+    d.inflated_inline_stream->setGeometry(&d.deforming_inline->geometry());
     d.embree_rebuilt = std::make_unique<EmbreeClosest>(d.half);
   } catch (const std::exception& e) {
     std::fprintf(stderr, "bench_dynamic: %s (deformation): %s\n", name.c_str(), e.what());
@@ -485,7 +500,8 @@ DeformFixture& deformFixture(const std::string& name) {
 // Puts every deformable method at t = 0.5 (the query benchmarks' state).
 void setHalf(DeformFixture& d) {
   d.keyframe->setTime(0.5);
-  if (!d.deforming->setPositions(d.half.positions).accepted) {
+  if (!d.deforming->setPositions(d.half.positions).accepted ||
+      !d.deforming_inline->setPositions(d.half.positions).accepted) {
     std::fprintf(stderr, "bench_dynamic: %s: DeformingBody refused positions within its bounds\n", d.name.c_str());
     std::exit(3);
   }
@@ -662,6 +678,16 @@ void benchBounds(benchmark::State& state, std::string mesh_name, BoundsMethod me
         }
         break;
       }
+      case BoundsMethod::kSetPositionsInline: {
+        const double start = processCpuSeconds();
+        const DisplacementCheck check = d.deforming_inline->setPositions(positions);
+        seconds = processCpuSeconds() - start;
+        if (!check.accepted) {
+          state.SkipWithError("DeformingBody refused positions within its bounds");
+          return;
+        }
+        break;
+      }
       case BoundsMethod::kInflate: {
         const double start = processCpuSeconds();
         d.deforming->inflate(d.delta);
@@ -725,6 +751,7 @@ void benchDeformed(benchmark::State& state, std::string mesh_name, DeformedMetho
     switch (method) {
       case DeformedMethod::kMsKeyframe: meshsweeper(*d.keyframe_stream); break;
       case DeformedMethod::kMsInflated: meshsweeper(*d.inflated_stream); break;
+      case DeformedMethod::kMsInflatedInline: meshsweeper(*d.inflated_inline_stream); break;
       case DeformedMethod::kMsRebuilt: meshsweeper(*d.rebuilt_stream); break;
       case DeformedMethod::kEmbreeRefit:
         for (size_t i = 0; i < n; ++i) {

@@ -44,11 +44,14 @@
 namespace meshsweeper {
 namespace {
 
-// A deforming body keeps inline faces (DeformingBody::setInlineFaces) while its queries test at
-// least this many leaf blocks per leaf block it has, per step. Measured (bench_service, one
-// thread): refreshing a leaf block costs about 63 ns, and testing one inline instead of
-// gathering its corners saves about 25 ns; so inline faces pay from about 2.5 tests a leaf.
-constexpr double kInlineFacesTests = 2.5;
+// A deforming body turns inline faces on (DeformingBody::setInlineFaces) when its queries
+// tested at least kInlineFacesOn leaf blocks per leaf block it has in the last step, and off
+// below kInlineFacesOff (the refitted boxes open fewer leaves, so a lower bound to stay on
+// keeps it from flipping every step). Measured (bench_service, one thread): refreshing a leaf
+// block costs about 63 ns, and testing one inline instead of gathering its corners saves about
+// 25 ns; so inline faces pay from about 2.5 tests a leaf.
+constexpr double kInlineFacesOn = 2.5;
+constexpr double kInlineFacesOff = 1.0;
 
 constexpr double kInf = std::numeric_limits<double>::infinity();
 
@@ -577,9 +580,9 @@ PositionsUpdate DistanceService::setPositions(BodyHandle body, PointsRef positio
 PositionsUpdate DistanceService::setPositions(BodyHandle body, const std::vector<Vec3>& positions) {
   Body& b = impl_->body(body, "setPositions", BodyKind::kDeforming);
   // Inline faces when the last step's queries tested enough leaf blocks to pay for refreshing
-  // them all (kInlineFacesTests).
-  const double leaves = b.deforming->hierarchy()->leafCount();
-  b.deforming->setInlineFaces(static_cast<double>(b.leaves_tested) >= kInlineFacesTests * leaves);
+  // them all (kInlineFacesOn, kInlineFacesOff).
+  const double per_leaf = static_cast<double>(b.leaves_tested) / b.deforming->hierarchy()->leafCount();
+  b.deforming->setInlineFaces(per_leaf >= (b.deforming->inlineFaces() ? kInlineFacesOff : kInlineFacesOn));
   // Throws (body unchanged) on a wrong count or a non-finite position.
   const DisplacementCheck check = b.deforming->setPositions(positions);
   PositionsUpdate update;

@@ -237,7 +237,7 @@ class DistanceService {
   // kDeforming: whether the body keeps inline faces (DeformingBody::setInlineFaces). Each
   // setPositions() decides it from the last step's work on the body: on when its queries
   // tested at least 2.5 leaf blocks per leaf block of its hierarchy (a cloth draped over it),
-  // off for a body few points reach. Answers never depend on it.
+  // off again below 1 (a body few points reach). Answers never depend on it.
   bool inlineFaces(BodyHandle body) const;
   // kKeyframed, kDeforming: the current world positions [vertex].
   const std::vector<Vec3>& positions(BodyHandle body) const;
