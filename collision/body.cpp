@@ -187,6 +187,15 @@ Vec3 BodyShape::restPseudonormal(TriangleIndex triangle, Feature feature) const 
   return vertex_normals_[mesh().triangles[triangle][corner]];
 }
 
+void BodyShape::prefetchRestPseudonormal(TriangleIndex triangle, Feature feature) const {
+  const int corner = featureCorner(feature);
+  const Vec3* where = feature == Feature::kFace       ? &face_normals_[triangle]
+                      : isEdgeFeature(feature)        ? &edge_normals_[3 * static_cast<size_t>(triangle) + corner]
+                                                      : &vertex_normals_[mesh().triangles[triangle][corner]];
+  __builtin_prefetch(where);
+  __builtin_prefetch(reinterpret_cast<const char*>(where + 1) - 1);  // a Vec3 may straddle two lines
+}
+
 Vec3 BodyShape::pseudonormal(TriangleIndex triangle, Feature feature, const Vec3* positions) const {
   const Mesh& m = mesh();
   const Triangle& t = m.triangles[triangle];

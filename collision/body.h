@@ -59,6 +59,8 @@ class BodyShape {
 
   // The pseudonormal of `feature` of `triangle` at the rest positions (table look-up).
   Vec3 restPseudonormal(TriangleIndex triangle, Feature feature) const;
+  // Starts loading what restPseudonormal(triangle, feature) reads (a cache hint, no effect).
+  void prefetchRestPseudonormal(TriangleIndex triangle, Feature feature) const;
   // The same at other positions ([vertex], as many as the mesh has, same connectivity),
   // computed from the feature's faces only. Equals restPseudonormal() at the rest positions
   // up to rounding.

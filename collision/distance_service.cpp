@@ -117,8 +117,15 @@ struct StreamSlot {
 };
 
 // Per-thread scratch: one stream per body slot, candidate lists, rebuild buffers.
+struct BestHit {
+  uint32_t slot = 0;
+  ClosestPoint c;
+  Vec3 q = Vec3::Zero();  // the point in the body's frame
+};
+
 struct Scratch {
   std::vector<StreamSlot> streams;      // [slot]
+  std::vector<BestHit> best;            // [local point] closest hit of a block's point
   std::vector<uint32_t> candidates;     // [local point * slots + k]
   std::vector<uint32_t> candidate_count;  // [local point]
   std::vector<uint32_t> begin;          // rebuilt CSR of a block
@@ -370,14 +377,21 @@ struct DistanceService::Impl {
       }
     }
 
+    // Two passes: the queries, then the hits. A hit's pseudonormal is a table lookup that
+    // usually misses the cache; the first pass starts loading it, the second reads it.
+    s.best.resize(count);
     for (uint32_t j = 0; j < count; ++j) {
       const size_t i = first + j;
       const Vec3 p = points.row(i).transpose();
       double best = kInf;
-      uint32_t best_slot = 0;
-      ClosestPoint best_c;
-      Vec3 best_q = Vec3::Zero();
+      BestHit& hit = s.best[j];
+      hit.c.triangle = kInvalidIndex;
       for (uint32_t k = states.begin[j]; k < states.begin[j + 1]; ++k) {
+        // The pair two ahead: start loading its state (a cache hint).
+        if (k + 2 < states.pairs.size()) {
+          const char* ahead = reinterpret_cast<const char*>(&states.pairs[k + 2]);
+          for (size_t line = 0; line < sizeof(PairState); line += 64) __builtin_prefetch(ahead + line);
+        }
         PairState& pair = states.pairs[k];
         const Vec3 q = toBody(pair.slot, p);
         // The closest face within d: a pair out of reach is answered (or certified) without
@@ -391,17 +405,20 @@ struct DistanceService::Impl {
         s.streams[pair.slot].leaves_tested += c.counters.leaves_tested;
         if (c.distance <= d && c.distance < best) {
           best = c.distance;
-          best_slot = pair.slot;
-          best_c = c;
-          best_q = q;
+          hit = {pair.slot, c, q};
         }
       }
-      if (best_c.triangle != kInvalidIndex) {  // set only for a hit within d
-        out.hits_[i] = makeHit(best_slot, best_q, best_c.triangle, best_c.feature, best_c.point,
-                               best_c.barycentric, best_c.distance);
-        out.count_[i] = 1;
-        ++stats.hits;
-      }
+      if (hit.c.triangle != kInvalidIndex && bodies[hit.slot].kind == BodyKind::kRigid)
+        bodies[hit.slot].shape->prefetchRestPseudonormal(hit.c.triangle, hit.c.feature);
+    }
+    for (uint32_t j = 0; j < count; ++j) {
+      const BestHit& hit = s.best[j];
+      if (hit.c.triangle == kInvalidIndex) continue;  // set only for a hit within d
+      const size_t i = first + j;
+      out.hits_[i] = makeHit(hit.slot, hit.q, hit.c.triangle, hit.c.feature, hit.c.point, hit.c.barycentric,
+                             hit.c.distance);
+      out.count_[i] = 1;
+      ++stats.hits;
     }
     stats.states = states.pairs.size();
   }
