@@ -210,6 +210,8 @@ struct PathChecks {
   Failures coherent{"closestCoherent vs brute force"};
   Failures state{"closestCoherent(p, CoherentState) vs brute force"};
   size_t state_certified = 0;
+  Failures set{"compact set just gathered: sorted, block bounds, certificate (brute force)"};
+  size_t sets_checked = 0;
   Failures capped{"closestCoherent(p, CoherentState, max_distance) vs brute force"};
   size_t capped_certified = 0, capped_none = 0, capped_hits = 0;
   Failures exact{"closestWithinCoherent(p, 0) vs brute force"};
@@ -221,6 +223,41 @@ struct PathChecks {
 
 constexpr size_t kK = 5;
 constexpr double kCaps[3] = {0.002, 0.01, 0.03};  // max_distance, fractions of the diagonal
+
+// A compact state's set, right after it was gathered at state.anchor: faces by increasing
+// distance from the anchor (as computed up to rounding), block_lower[b] at most the distance of
+// every face of blocks b.., and the certificate: every face outside the set at least `reach`
+// from the anchor (brute force over the mesh).
+void checkSet(const Mesh& mesh, const CoherentState& state, Failures& failures) {
+  const Vec3& a = state.anchor;
+  auto distance = [&](TriangleIndex f) {
+    const Triangle& t = mesh.triangles[f];
+    return std::sqrt(squaredDistanceToTriangle(a, mesh.positions[t[0]], mesh.positions[t[1]], mesh.positions[t[2]]));
+  };
+  const double slack = 1e-12;
+  std::vector<uint8_t> in_set(mesh.triangles.size(), 0);
+  for (uint32_t i = 0; i < state.count; ++i) {
+    in_set[state.faces[i]] = 1;
+    const double d = distance(state.faces[i]);
+    if (i + 1 < state.count)
+      failures.check(d <= distance(state.faces[i + 1]) * (1 + slack) + slack, [&] {
+        return "faces " + std::to_string(i) + " and " + std::to_string(i + 1) + " out of order: " + num(d) + " > " +
+               num(distance(state.faces[i + 1]));
+      });
+    for (uint32_t b = 0; b <= i / 8; ++b)
+      failures.check(state.block_lower[b] <= d * (1 + slack) + slack, [&] {
+        return "block_lower[" + std::to_string(b) + "] = " + num(state.block_lower[b]) + " above face " +
+               std::to_string(i) + " at " + num(d);
+      });
+  }
+  for (TriangleIndex f = 0; f < mesh.triangles.size(); ++f) {
+    if (in_set[f]) continue;
+    const double d = distance(f);
+    failures.check(d >= state.reach * (1 - slack), [&] {
+      return "face " + std::to_string(f) + " outside the set at " + num(d) + " < reach " + num(state.reach);
+    });
+  }
+}
 
 // Runs every coherent kind along `path` and checks each step against brute force.
 void checkPath(const Mesh& mesh, const std::vector<Vec3>& path,
@@ -242,6 +279,11 @@ void checkPath(const Mesh& mesh, const std::vector<Vec3>& path,
     const ClosestPoint compact = s.cold.closestCoherent(p, s.state, &certified);
     checker.exact(compact, p, truth, checks.state);
     checks.state_certified += certified;
+    // A set just gathered (every rebuild on small meshes, every 8th on large ones).
+    if (!certified && s.state.has_set && (mesh.triangles.size() <= 20000 || i % 8 == 0)) {
+      checkSet(mesh, s.state, checks.set);
+      ++checks.sets_checked;
+    }
     // With a cap: the exact answer within it, else none (and nothing closer than the cap).
     for (int c = 0; c < 3; ++c) {
       const double cap = kCaps[c] * checker.diagonal;
@@ -336,6 +378,7 @@ void checkMesh(const Case& c, size_t steps, uint64_t seed) {
     checkPath(mesh, path, s, checks, 1e-3 * diagonal);
     checkSetCounters(s.coherent, path.size(), spec.step < 0.001);
     if (spec.step < 0.001) CHECK(checks.state_certified > 0);
+    CHECK(checks.sets_checked > 0);
     // The capped queries saw both answers, and certified some.
     CHECK(checks.capped_hits > 0);
     CHECK(checks.capped_none > 0);
