@@ -339,6 +339,12 @@ struct DistanceService::Impl {
     for (uint32_t j = 0; same && j < count; ++j) {
       const uint32_t* cand = s.candidates.data() + j * slots;
       const uint32_t b0 = states.begin[j];
+      // This pass is the first to touch the block's states: start loading the ones ahead (the
+      // queries below read them whole).
+      if (b0 + 4 < states.pairs.size()) {
+        const char* ahead = reinterpret_cast<const char*>(&states.pairs[b0 + 4]);
+        for (size_t line = 0; line < sizeof(PairState); line += 64) __builtin_prefetch(ahead + line);
+      }
       same = states.begin[j + 1] - b0 == s.candidate_count[j];
       for (uint32_t k = 0; same && k < s.candidate_count[j]; ++k)
         same = states.pairs[b0 + k].slot == cand[k] && states.pairs[b0 + k].generation == bodies[cand[k]].generation;
