@@ -611,10 +611,17 @@ ClosestPoint QueryStream::closestCoherent(const Vec3& p, CoherentState& state, b
     }
   }
   if (!certified) {
-    // Start from the previous face's distance, or the cap if smaller.
+    // Start from the best face of the set just tested (no distance to recompute), else the
+    // previous face's distance; or the cap if smaller.
     double start2 = within2;
+    const TriangleIndex set_face = face;
     face = kInvalidIndex;
-    if (same_lineage && state.last_face < mesh.triangles.size()) {
+    if (set_face != kInvalidIndex) {
+      if (best2 < start2) {
+        start2 = best2;
+        face = set_face;
+      }
+    } else if (same_lineage && state.last_face < mesh.triangles.size()) {
       const Triangle& t = mesh.triangles[state.last_face];
       const double last2 = squaredDistanceToTriangle(p, g.positions[t[0]], g.positions[t[1]], g.positions[t[2]]);
       if (last2 < start2) {
