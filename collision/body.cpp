@@ -180,18 +180,19 @@ std::shared_ptr<const BodyShape> BodyShape::build(std::shared_ptr<const Hierarch
   return shape;
 }
 
-Vec3 BodyShape::restPseudonormal(TriangleIndex triangle, Feature feature) const {
+const Vec3& BodyShape::restPseudonormalEntry(TriangleIndex triangle, Feature feature) const {
   if (feature == Feature::kFace) return face_normals_[triangle];
   const int corner = featureCorner(feature);
-  if (isEdgeFeature(feature)) return edge_normals_[3 * triangle + corner];
+  if (isEdgeFeature(feature)) return edge_normals_[3 * static_cast<size_t>(triangle) + corner];
   return vertex_normals_[mesh().triangles[triangle][corner]];
 }
 
+Vec3 BodyShape::restPseudonormal(TriangleIndex triangle, Feature feature) const {
+  return restPseudonormalEntry(triangle, feature);
+}
+
 void BodyShape::prefetchRestPseudonormal(TriangleIndex triangle, Feature feature) const {
-  const int corner = featureCorner(feature);
-  const Vec3* where = feature == Feature::kFace       ? &face_normals_[triangle]
-                      : isEdgeFeature(feature)        ? &edge_normals_[3 * static_cast<size_t>(triangle) + corner]
-                                                      : &vertex_normals_[mesh().triangles[triangle][corner]];
+  const Vec3* where = &restPseudonormalEntry(triangle, feature);
   __builtin_prefetch(where);
   __builtin_prefetch(reinterpret_cast<const char*>(where + 1) - 1);  // a Vec3 may straddle two lines
 }

@@ -71,6 +71,8 @@ class BodyShape {
 
  private:
   BodyShape() = default;
+  // The table entry restPseudonormal() returns.
+  const Vec3& restPseudonormalEntry(TriangleIndex triangle, Feature feature) const;
   std::shared_ptr<const Hierarchy> hierarchy_;
   bool closed_ = false;
   std::string open_reason_;

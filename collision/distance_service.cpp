@@ -75,6 +75,12 @@ struct PairState {
   CoherentState state = CoherentState();  // value-initialised: a cold start, faces zeroed
 };
 
+// Starts loading a pair's state (a cache hint).
+void prefetchPair(const PairState& pair) {
+  const char* base = reinterpret_cast<const char*>(&pair);
+  for (size_t line = 0; line < sizeof(PairState); line += 64) __builtin_prefetch(base + line);
+}
+
 // The pair states of one block of points: [local point + 1] CSR into pairs, by increasing slot.
 struct BlockStates {
   uint32_t points = 0;
@@ -116,13 +122,14 @@ struct StreamSlot {
   uint64_t leaves_tested = 0;  // this step, by this thread (summed per body after the step)
 };
 
-// Per-thread scratch: one stream per body slot, candidate lists, rebuild buffers.
+// The closest hit of one point over its bodies, kept between a step's two passes.
 struct BestHit {
   uint32_t slot = 0;
   ClosestPoint c;
   Vec3 q = Vec3::Zero();  // the point in the body's frame
 };
 
+// Per-thread scratch: one stream per body slot, candidate lists, rebuild buffers.
 struct Scratch {
   std::vector<StreamSlot> streams;      // [slot]
   std::vector<BestHit> best;            // [local point] closest hit of a block's point
@@ -341,10 +348,7 @@ struct DistanceService::Impl {
       const uint32_t b0 = states.begin[j];
       // This pass is the first to touch the block's states: start loading the ones ahead (the
       // queries below read them whole).
-      if (b0 + 4 < states.pairs.size()) {
-        const char* ahead = reinterpret_cast<const char*>(&states.pairs[b0 + 4]);
-        for (size_t line = 0; line < sizeof(PairState); line += 64) __builtin_prefetch(ahead + line);
-      }
+      if (b0 + 4 < states.pairs.size()) prefetchPair(states.pairs[b0 + 4]);
       same = states.begin[j + 1] - b0 == s.candidate_count[j];
       for (uint32_t k = 0; same && k < s.candidate_count[j]; ++k)
         same = states.pairs[b0 + k].slot == cand[k] && states.pairs[b0 + k].generation == bodies[cand[k]].generation;
@@ -393,11 +397,7 @@ struct DistanceService::Impl {
       BestHit& hit = s.best[j];
       hit.c.triangle = kInvalidIndex;
       for (uint32_t k = states.begin[j]; k < states.begin[j + 1]; ++k) {
-        // The pair two ahead: start loading its state (a cache hint).
-        if (k + 2 < states.pairs.size()) {
-          const char* ahead = reinterpret_cast<const char*>(&states.pairs[k + 2]);
-          for (size_t line = 0; line < sizeof(PairState); line += 64) __builtin_prefetch(ahead + line);
-        }
+        if (k + 2 < states.pairs.size()) prefetchPair(states.pairs[k + 2]);  // the pair two ahead
         PairState& pair = states.pairs[k];
         const Vec3 q = toBody(pair.slot, p);
         // The closest face within d: a pair out of reach is answered (or certified) without

@@ -31,37 +31,22 @@ float boxMargin(double extent) {
   return static_cast<float>(std::max(1.0, extent) * std::ldexp(1.0, -19));
 }
 
-void refitBounds(const Hierarchy& h, const Vec3* positions, std::vector<Node8>& nodes, bool radii, bool boxes) {
-  const Mesh& mesh = h.mesh();
-  const auto& lanes = h.leafTriangles();
-  const double scale = h.boxScale();
+namespace {
+
+// Rewrites every used slot's box, children first (a child node always has a larger index than
+// its parent): a leaf slot's from leaf_box(leaf, lo, hi), an inner slot's as the union of its
+// child node's used slots.
+template <class LeafBox>
+void refitSlotBoxes(std::vector<Node8>& nodes, LeafBox&& leaf_box) {
   const float inf = std::numeric_limits<float>::infinity();
-  // Leaf slots from their faces, then inner slots from their child's slots, children first
-  // (a child node always has a larger index than its parent).
-  double extent = 0;
-  for (size_t v = 0; boxes && v < mesh.positions.size(); ++v)
-    extent = std::max(extent, ((positions[v] - h.center()) * scale).cwiseAbs().maxCoeff());
-  const float margin = boxMargin(extent);
-  for (size_t node = boxes ? nodes.size() : 0; node-- > 0;) {
+  for (size_t node = nodes.size(); node-- > 0;) {
     Node8& n = nodes[node];
     for (int k = 0; k < 8; ++k) {
       const ChildRef c = n.child[k];
       if (c == kEmptyChild) continue;
       float lo[3] = {inf, inf, inf}, hi[3] = {-inf, -inf, -inf};
       if (isLeafRef(c)) {
-        const int32_t leaf = leafIndex(c);
-        Vec3 low = Vec3::Constant(std::numeric_limits<double>::infinity()), high = -low;
-        for (uint32_t lane = 0; lane < h.leafLanes(leaf); ++lane) {
-          for (VertexIndex v : mesh.triangles[lanes[8 * leaf + lane]]) {
-            low = low.cwiseMin(positions[v]);
-            high = high.cwiseMax(positions[v]);
-          }
-        }
-        const Vec3 scaled_low = (low - h.center()) * scale, scaled_high = (high - h.center()) * scale;
-        for (int axis = 0; axis < 3; ++axis) {
-          lo[axis] = std::nextafter(static_cast<float>(scaled_low[axis]), -inf) - margin;
-          hi[axis] = std::nextafter(static_cast<float>(scaled_high[axis]), inf) + margin;
-        }
+        leaf_box(leafIndex(c), lo, hi);
       } else {
         const Node8& child = nodes[c];
         for (int j = 0; j < 8; ++j) {
@@ -77,6 +62,36 @@ void refitBounds(const Hierarchy& h, const Vec3* positions, std::vector<Node8>& 
         n.upper[axis][k] = hi[axis];
       }
     }
+  }
+}
+
+}  // namespace
+
+void refitBounds(const Hierarchy& h, const Vec3* positions, std::vector<Node8>& nodes, bool radii, bool boxes) {
+  const Mesh& mesh = h.mesh();
+  const auto& lanes = h.leafTriangles();
+  const double scale = h.boxScale();
+  const float inf = std::numeric_limits<float>::infinity();
+  // Leaf slots from their faces' vertices (refitSlotBoxes does the inner slots).
+  double extent = 0;
+  for (size_t v = 0; boxes && v < mesh.positions.size(); ++v)
+    extent = std::max(extent, ((positions[v] - h.center()) * scale).cwiseAbs().maxCoeff());
+  const float margin = boxMargin(extent);
+  if (boxes) {
+    refitSlotBoxes(nodes, [&](int32_t leaf, float lo[3], float hi[3]) {
+      Vec3 low = Vec3::Constant(std::numeric_limits<double>::infinity()), high = -low;
+      for (uint32_t lane = 0; lane < h.leafLanes(leaf); ++lane) {
+        for (VertexIndex v : mesh.triangles[lanes[8 * leaf + lane]]) {
+          low = low.cwiseMin(positions[v]);
+          high = high.cwiseMax(positions[v]);
+        }
+      }
+      const Vec3 scaled_low = (low - h.center()) * scale, scaled_high = (high - h.center()) * scale;
+      for (int axis = 0; axis < 3; ++axis) {
+        lo[axis] = std::nextafter(static_cast<float>(scaled_low[axis]), -inf) - margin;
+        hi[axis] = std::nextafter(static_cast<float>(scaled_high[axis]), inf) + margin;
+      }
+    });
   }
   if (!radii) return;
   // eps of a slot = the largest distance from its subtree's vertices to its triangle T, found
@@ -220,60 +235,32 @@ TreeGeometry Hierarchy::restGeometry() const {
 }
 
 void fillLeafBlocks(const Hierarchy& h, const Vec3* positions, std::vector<TriangleBlock8>& blocks) {
-  const Mesh& mesh = h.mesh();
+  const Triangle* triangles = h.mesh().triangles.data();
   const TriangleIndex* lanes = h.leafTriangles().data();
   blocks.resize(h.leafCount());
-  for (uint32_t leaf = 0; leaf < blocks.size(); ++leaf) {
-    TriangleBlock8& block = blocks[leaf];
-    const TriangleIndex* faces = lanes + 8 * static_cast<size_t>(leaf);
-    for (uint32_t lane = 0; lane < 8; ++lane) {
-      const TriangleIndex f = faces[faces[lane] != kInvalidIndex ? lane : 0];  // unused: lane 0
-      for (int k = 0; k < 3; ++k) {
-        const Vec3& x = positions[mesh.triangles[f][k]];
-        for (int axis = 0; axis < 3; ++axis) block.v[k][axis][lane] = x[axis];
-      }
-    }
-  }
+  for (uint32_t leaf = 0; leaf < blocks.size(); ++leaf)
+    gatherTriangleBlock(triangles, positions, lanes + 8 * static_cast<size_t>(leaf),
+                        h.leafLanes(static_cast<int32_t>(leaf)), blocks[leaf]);
 }
 
 void refitBoxes(const Hierarchy& h, const TriangleBlock8* blocks, double extent, std::vector<Node8>& nodes) {
   const double scale = h.boxScale();
   const Vec3& center = h.center();
   const float margin = boxMargin(extent);
-  // Children first: a child node always has a larger index than its parent.
-  for (size_t node = nodes.size(); node-- > 0;) {
-    Node8& n = nodes[node];
-    for (int k = 0; k < 8; ++k) {
-      const ChildRef c = n.child[k];
-      if (c == kEmptyChild) continue;
-      if (isLeafRef(c)) {
-        // Unused lanes copy a used one, so all 8 lanes of each corner count.
-        const TriangleBlock8& b = blocks[leafIndex(c)];
-        for (int axis = 0; axis < 3; ++axis) {
-          double low = b.v[0][axis][0], high = low;
-          for (int corner = 0; corner < 3; ++corner)
-            for (int lane = 0; lane < 8; ++lane) {
-              low = std::min(low, b.v[corner][axis][lane]);
-              high = std::max(high, b.v[corner][axis][lane]);
-            }
-          n.lower[axis][k] = floatBelow((low - center[axis]) * scale) - margin;
-          n.upper[axis][k] = floatAbove((high - center[axis]) * scale) + margin;
+  refitSlotBoxes(nodes, [&](int32_t leaf, float lo[3], float hi[3]) {
+    // Unused lanes copy a used one, so all 8 lanes of each corner count.
+    const TriangleBlock8& b = blocks[leaf];
+    for (int axis = 0; axis < 3; ++axis) {
+      double low = b.v[0][axis][0], high = low;
+      for (int corner = 0; corner < 3; ++corner)
+        for (int lane = 0; lane < 8; ++lane) {
+          low = std::min(low, b.v[corner][axis][lane]);
+          high = std::max(high, b.v[corner][axis][lane]);
         }
-      } else {
-        const Node8& child = nodes[c];
-        for (int axis = 0; axis < 3; ++axis) {
-          float lo = std::numeric_limits<float>::infinity(), hi = -lo;
-          for (int j = 0; j < 8; ++j) {
-            if (child.child[j] == kEmptyChild) continue;
-            lo = std::min(lo, child.lower[axis][j]);
-            hi = std::max(hi, child.upper[axis][j]);
-          }
-          n.lower[axis][k] = lo;
-          n.upper[axis][k] = hi;
-        }
-      }
+      lo[axis] = floatBelow((low - center[axis]) * scale) - margin;
+      hi[axis] = floatAbove((high - center[axis]) * scale) + margin;
     }
-  }
+  });
 }
 
 std::string validate(const Hierarchy& h) {

@@ -660,16 +660,9 @@ void HierarchyBuilder::splitFaces(FaceItem* first, FaceItem* last, size_t group,
 
 uint32_t HierarchyBuilder::addLeafBlock(const TriangleIndex* faces, size_t count) {
   const uint32_t leaf = static_cast<uint32_t>(h_.leaf_blocks_.size());
-  TriangleBlock8& block = h_.leaf_blocks_.emplace_back();
-  for (uint32_t lane = 0; lane < 8; ++lane) {
-    const bool used = lane < count;
-    const TriangleIndex f = faces[used ? lane : 0];
-    for (int k = 0; k < 3; ++k) {
-      const Vec3& x = mesh_.positions[mesh_.triangles[f][k]];
-      for (int axis = 0; axis < 3; ++axis) block.v[k][axis][lane] = x[axis];
-    }
-    h_.leaf_triangles_.push_back(used ? f : kInvalidIndex);
-  }
+  gatherTriangleBlock(mesh_.triangles.data(), mesh_.positions.data(), faces, static_cast<uint32_t>(count),
+                      h_.leaf_blocks_.emplace_back());
+  for (uint32_t lane = 0; lane < 8; ++lane) h_.leaf_triangles_.push_back(lane < count ? faces[lane] : kInvalidIndex);
   h_.leaf_lanes_.push_back(static_cast<uint8_t>(count));
   return leaf;
 }

@@ -241,14 +241,8 @@ uint32_t QueryStream::testLeaf(int32_t leaf, const Vec3& p, double out[8]) {
   }
   // Moving geometry without inline faces: gather the lanes' corners from the positions.
   const Hierarchy& h = *hierarchy_;
-  const TriangleIndex* lanes = &h.leafTriangles()[8 * static_cast<size_t>(leaf)];
-  for (uint32_t lane = 0; lane < 8; ++lane) {
-    const Triangle& t = h.mesh().triangles[lanes[lane < used ? lane : 0]];
-    for (int k = 0; k < 3; ++k) {
-      const Vec3& x = g.positions[t[k]];
-      for (int axis = 0; axis < 3; ++axis) gather_.v[k][axis][lane] = x[axis];
-    }
-  }
+  gatherTriangleBlock(h.mesh().triangles.data(), g.positions, &h.leafTriangles()[8 * static_cast<size_t>(leaf)],
+                      used, gather_);
   squaredDistancesToBlock(p, gather_, out);
   return used;
 }
@@ -368,10 +362,6 @@ double QueryStream::depthFirst(const Vec3& p, double start2, double reach, Trian
   return best2;
 }
 
-// The rebuild of a set certificate: a depth-first search from start2 (best_face its face) that
-// leaves in gathered_ the faces within best + reach of p, at most `capacity` of them (the
-// nearest), in no particular order. Returns the set's reach: every face not kept is at least
-// that far from p.
 namespace {
 
 // Sorts entries [0, n) (n <= kMaxRanked) by squared distance (ties: the order found), keeping the
@@ -411,6 +401,10 @@ double sortNearest(std::pair<double, TriangleIndex>* entries, size_t n, size_t k
 
 }  // namespace
 
+// The rebuild of a set certificate: a depth-first search from start2 (best_face its face) that
+// leaves in gathered_ the faces within best + reach of p, at most `capacity` of them (the
+// nearest): by increasing distance if `sorted` (capacity <= kCoherentSetSize), else in no
+// particular order. Returns the set's reach: every face not kept is at least that far from p.
 double QueryStream::gatherCandidates(const Vec3& p, double start2, double reach, uint32_t capacity,
                                      TriangleIndex& best_face, bool sorted) {
   gathered_.clear();
@@ -426,21 +420,18 @@ double QueryStream::gatherCandidates(const Vec3& p, double start2, double reach,
     else outside = std::min(outside, d);
   }
   gathered_.resize(kept);
-  if (sorted) {
-    const double first_out2 = sortNearest(gathered_.data(), kept, capacity);
-    if (kept > capacity) {
-      gathered_.resize(capacity);
-      return std::sqrt(first_out2);
-    }
-    return std::max(std::nextafter(limit, kInf), outside);
-  }
-  // If too many were gathered, keep the nearest (a partial selection, not a sort): the reach
+  // If too many were gathered, keep the nearest (ranked, or a partial selection): the reach
   // drops to the first left out.
-  if (gathered_.size() > capacity) {
+  double first_out2 = kInf;
+  if (sorted) {
+    first_out2 = sortNearest(gathered_.data(), kept, capacity);
+  } else if (kept > capacity) {
     std::nth_element(gathered_.begin(), gathered_.begin() + capacity, gathered_.end());
-    const double first_out = std::sqrt(gathered_[capacity].first);
+    first_out2 = gathered_[capacity].first;
+  }
+  if (kept > capacity) {
     gathered_.resize(capacity);
-    return first_out;
+    return std::sqrt(first_out2);
   }
   return std::max(std::nextafter(limit, kInf), outside);
 }
@@ -523,16 +514,13 @@ ClosestPoint QueryStream::closestCoherent(const Vec3& p) {
     }
     const double set_reach = gatherCandidates(p, start2, reach, options_.max_candidates, face);
     set_faces_.clear();
-    set_blocks_.resize((gathered_.size() + 7) / 8);
+    for (const auto& entry : gathered_) set_faces_.push_back(entry.second);
+    set_blocks_.resize((set_faces_.size() + 7) / 8);
     set_block_lower_.resize(set_blocks_.size());
     orderIntoBlocks(set_block_lower_.data(), set_blocks_.size());
-    for (size_t i = 0; i < set_blocks_.size() * 8; ++i) {
-      const TriangleIndex f = gathered_[std::min(i, gathered_.size() - 1)].second;
-      if (i < gathered_.size()) set_faces_.push_back(f);
-      const Triangle& t = hierarchy_->mesh().triangles[f];
-      for (int k = 0; k < 3; ++k)
-        for (int axis = 0; axis < 3; ++axis) set_blocks_[i / 8].v[k][axis][i % 8] = g.positions[t[k]][axis];
-    }
+    for (size_t b = 0; b < set_blocks_.size(); ++b)
+      gatherTriangleBlock(hierarchy_->mesh().triangles.data(), g.positions, set_faces_.data() + 8 * b,
+                          static_cast<uint32_t>(std::min<size_t>(8, set_faces_.size() - 8 * b)), set_blocks_[b]);
     coherence_.candidates += set_faces_.size();
     anchor_ = p;
     set_reach_ = set_faces_.empty() ? 0 : set_reach;
@@ -592,11 +580,7 @@ ClosestPoint QueryStream::closestCoherent(const Vec3& p, CoherentState& state, b
       for (uint32_t first = 0; first < state.count; first += 8) {
         if (first > 0 && state.block_lower[first / 8] - moved > std::min(std::sqrt(best2), within) * (1 + 1e-9)) break;
         const uint32_t lanes = std::min<uint32_t>(8, state.count - first);
-        for (uint32_t lane = 0; lane < 8; ++lane) {
-          const Triangle& t = mesh.triangles[state.faces[first + (lane < lanes ? lane : 0)]];
-          for (int k = 0; k < 3; ++k)
-            for (int axis = 0; axis < 3; ++axis) gather_.v[k][axis][lane] = g.positions[t[k]][axis];
-        }
+        gatherTriangleBlock(mesh.triangles.data(), g.positions, state.faces + first, lanes, gather_);
         squaredDistancesToBlock(p, gather_, exact);
         counters_.triangles_tested += lanes;
         for (uint32_t lane = 0; lane < lanes; ++lane) {

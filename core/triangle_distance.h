@@ -32,4 +32,17 @@ struct alignas(64) TriangleBlock8 {
 // squaredDistanceToTriangle for that lane's triangle up to rounding (relative 1e-14).
 void squaredDistancesToBlock(const Vec3& p, const TriangleBlock8& block, double out[8]);
 
+// Writes the faces faces[0, used) (indices into `triangles`, corners at `positions`) into the
+// block's lanes; the lanes past `used` copy lane 0 (1 <= used <= 8).
+inline void gatherTriangleBlock(const Triangle* triangles, const Vec3* positions, const TriangleIndex* faces,
+                                uint32_t used, TriangleBlock8& block) {
+  for (uint32_t lane = 0; lane < 8; ++lane) {
+    const Triangle& t = triangles[faces[lane < used ? lane : 0]];
+    for (int k = 0; k < 3; ++k) {
+      const Vec3& x = positions[t[k]];
+      for (int axis = 0; axis < 3; ++axis) block.v[k][axis][lane] = x[axis];
+    }
+  }
+}
+
 }  // namespace meshsweeper
