@@ -34,7 +34,7 @@
 //
 // Flags: --quick (10k points, 1 and 4 bodies, 20 steps), --points=a,b  --bodies=a,b
 // --kinds=rigid,deforming  --threads=1,2  --steps=N  --methods=meshsweeper,embree
-// --reach=R (ServiceOptions::reach_steps)  --data-dir=PATH  --broadphase. Exit code 77 when a mesh is missing.
+// --reach=R (ServiceOptions::reach_steps)  --lead=L (ServiceOptions::lead_steps)  --data-dir=PATH  --broadphase. Exit code 77 when a mesh is missing.
 #include "bench/bench_util.h"
 #include "collision/broadphase.h"
 #include "collision/distance_service.h"
@@ -97,6 +97,7 @@ struct Options {
   std::vector<std::string> methods = {"meshsweeper", "embree"};
   int steps = 100;
   float reach_steps = ServiceOptions{}.reach_steps;
+  float lead_steps = ServiceOptions{}.lead_steps;
   std::string data_dir;
   bool broadphase = false;
 };
@@ -143,6 +144,8 @@ Options parseOptions(int argc, char** argv) {
         if (m != "meshsweeper" && m != "embree") usageError("unknown method '" + m + "'");
     } else if (flag == "--reach") {
       o.reach_steps = std::strtof(value.c_str(), nullptr);
+    } else if (flag == "--lead") {
+      o.lead_steps = std::strtof(value.c_str(), nullptr);
     } else if (flag == "--data-dir") {
       o.data_dir = value;
     } else if (flag == "--broadphase") {
@@ -450,8 +453,8 @@ struct RunResult {
 
 // Meshsweeper: the service.
 RunResult runMeshsweeper(const Scene& scene, const std::vector<std::shared_ptr<const Hierarchy>>& hierarchies,
-                         int steps, unsigned threads, float reach_steps) {
-  DistanceService service(ServiceOptions{threads, kBlock, reach_steps});
+                         int steps, unsigned threads, float reach_steps, float lead_steps) {
+  DistanceService service(ServiceOptions{threads, kBlock, reach_steps, lead_steps});
   std::vector<BodyHandle> handles;
   std::vector<std::vector<Vec3>> positions(scene.meshes.size());
   for (size_t b = 0; b < scene.meshes.size(); ++b) {
@@ -780,7 +783,7 @@ int main(int argc, char** argv) {
         std::vector<RunResult> results;
         for (const std::string& method : options.methods) {
           for (unsigned threads : options.threads) {
-            const RunResult r = method == "meshsweeper" ? runMeshsweeper(scene, hierarchies, options.steps, threads, options.reach_steps)
+            const RunResult r = method == "meshsweeper" ? runMeshsweeper(scene, hierarchies, options.steps, threads, options.reach_steps, options.lead_steps)
                                                         : runEmbree(scene, meshes, options.steps, threads);
             std::printf("| %s | %zu | %zu | %s | %u | %.2f | %.2f | %.2f | %.2f | %.2f | %.1f%% | %s |\n",
                         kind.c_str(), bodies, points, method.c_str(), threads, 1e3 * median(r.wall),

@@ -371,6 +371,7 @@ struct DistanceService::Impl {
             fresh.slot = slot;
             fresh.generation = bodies[slot].generation;
             fresh.state.reach_steps = options.reach_steps;
+            fresh.state.lead_steps = options.lead_steps;
             s.pairs.push_back(fresh);
           }
         }
@@ -467,6 +468,8 @@ DistanceService::DistanceService(const ServiceOptions& options) : impl_(std::mak
   if (options.block_size == 0) throw std::invalid_argument("DistanceService: block_size must be > 0");
   if (!(options.reach_steps >= 0) || !std::isfinite(options.reach_steps))
     throw std::invalid_argument("DistanceService: reach_steps must be finite and >= 0");
+  if (!(options.lead_steps >= 0) || !std::isfinite(options.lead_steps))
+    throw std::invalid_argument("DistanceService: lead_steps must be finite and >= 0");
   impl_->options = options;
   setThreads(options.threads);
 }

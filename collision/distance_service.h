@@ -173,6 +173,10 @@ struct ServiceOptions {
   // the step includes how far the faces moved): larger means fewer rebuilds but larger sets.
   // Answers never depend on it.
   float reach_steps = 2;
+  // A state's set is gathered lead_steps of the point's last steps ahead of it (when that is
+  // within 2 R): on a steady path the set lasts about twice as long (CoherentState::lead_steps;
+  // 0: gathered at the point). Answers never depend on it.
+  float lead_steps = 3;
 };
 
 class DistanceService {

@@ -27,6 +27,10 @@
 //   With a cap c (closest within c): D0 is min(D0, c), and min(M, c) + |p - q0| < L proves
 //   the answer, "none within c" when M > c. On a deforming geometry of the same lineage, faces
 //   moved by at most the growth of its drift since q0: it adds to |p - q0| in every bound.
+//   A compact state (CoherentState) gathers its set at q0 = p + lead_steps * (mean velocity)
+//   when that lead is within 2R: a steady point first moves toward q0, then away, so the set
+//   lasts about twice as long; p itself must be certified by the new set (else it is gathered
+//   at p), so the answer is exact either way.
 // Dynamic front (paper section 5.1): the front persists; moving by delta lowers every bound by
 //   delta. Entries store bound + drift-at-computation, so the current bound is key - drift and
 //   the heap order never changes; a stale entry reaching the top is recomputed and pushed back.
@@ -542,6 +546,49 @@ ClosestPoint QueryStream::closestCoherent(const Vec3& p) {
   return out;
 }
 
+// The set of a compact state from gathered_ (sorted by distance from anchor), with its reach.
+void QueryStream::storeSet(const Vec3& anchor, double set_reach, double drift, CoherentState& state) const {
+  for (uint32_t b = 0; b < kCoherentSetSize / 8; ++b)
+    state.block_lower[b] = 8 * b < gathered_.size() ? std::nextafter(static_cast<float>(std::sqrt(gathered_[8 * b].first)), 0.0f) : kFloatInf;
+  state.count = static_cast<uint32_t>(gathered_.size());
+  for (uint32_t i = 0; i < state.count; ++i) state.faces[i] = gathered_[i].second;
+  state.anchor = anchor;
+  state.reach = set_reach;
+  state.drift_at = drift;
+  state.has_set = set_reach > 0;  // infinite: every face is in the set
+}
+
+// Tests a compact state's set at p, `moved` from its anchor (drift included): best2 and face
+// receive the best candidate (face kInvalidIndex when certified and none is within `within`).
+// Returns whether the set's certificate proves that answer.
+bool QueryStream::testSet(const CoherentState& state, const Vec3& p, double moved, double within, double& best2,
+                          TriangleIndex& face) {
+  if (!(moved < state.reach)) return false;
+  const TreeGeometry& g = geometry();
+  const Mesh& mesh = hierarchy_->mesh();
+  // Block 0 first; the rest only if they could be closer (or within the cap).
+  double exact[8];
+  for (uint32_t first = 0; first < state.count; first += 8) {
+    if (first > 0 && state.block_lower[first / 8] - moved > std::min(std::sqrt(best2), within) * (1 + 1e-9)) break;
+    const uint32_t lanes = std::min<uint32_t>(8, state.count - first);
+    gatherTriangleBlock(mesh.triangles.data(), g.positions, state.faces + first, lanes, gather_);
+    squaredDistancesToBlock(p, gather_, exact);
+    counters_.triangles_tested += lanes;
+    for (uint32_t lane = 0; lane < lanes; ++lane) {
+      const TriangleIndex f = state.faces[first + lane];
+      if (exact[lane] < best2 || (exact[lane] == best2 && f < face)) {
+        best2 = exact[lane];
+        face = f;
+      }
+    }
+  }
+  // Every face outside the set is at least reach - moved away: nothing there is closer than
+  // the best candidate, or within the cap when no candidate is.
+  const bool certified = std::min(std::sqrt(best2), within) + moved < state.reach * (1 - 1e-9);
+  if (certified && !(best2 <= within * within)) face = kInvalidIndex;
+  return certified;
+}
+
 ClosestPoint QueryStream::closestCoherent(const Vec3& p, CoherentState& state, bool* certified_out,
                                           double max_distance) {
   const TreeGeometry& g = geometry();
@@ -549,9 +596,10 @@ ClosestPoint QueryStream::closestCoherent(const Vec3& p, CoherentState& state, b
   counters_ = {};
   if (!p.allFinite()) {
     if (certified_out) *certified_out = false;
-    const float reach_steps = state.reach_steps;
+    const float reach_steps = state.reach_steps, lead_steps = state.lead_steps;
     state = CoherentState{};
     state.reach_steps = reach_steps;
+    state.lead_steps = lead_steps;
     ClosestPoint out;
     out.distance = out.lower = out.upper = std::numeric_limits<double>::quiet_NaN();
     return out;
@@ -565,34 +613,23 @@ ClosestPoint QueryStream::closestCoherent(const Vec3& p, CoherentState& state, b
   const double within = cap < kInf ? cap * (1 + 1e-12) + 1e-15 / g.box_scale : kInf;
   const double within2 = within * within;
   if (same_lineage) {
-    const double step = (p - state.last_point).norm() + (g.drift - state.last_drift);
-    state.mean_step = state.mean_step > 0 ? 0.9f * state.mean_step + 0.1f * static_cast<float>(step)
-                                          : static_cast<float>(step);
+    const Vec3 point_step = p - state.last_point;
+    const double step = point_step.norm() + (g.drift - state.last_drift);
+    const Eigen::Vector3f velocity = point_step.cast<float>();
+    if (state.mean_step > 0) {
+      state.mean_step = 0.9f * state.mean_step + 0.1f * static_cast<float>(step);
+      state.mean_velocity = 0.9f * state.mean_velocity + 0.1f * velocity;
+    } else {
+      state.mean_step = static_cast<float>(step);
+      state.mean_velocity = velocity;
+    }
   }
   TriangleIndex face = kInvalidIndex;
   bool certified = false;
   double best2 = kInf;
   if (same_lineage && state.has_set) {
     const double moved = (p - state.anchor).norm() + (g.drift - state.drift_at);
-    if (moved < state.reach) {
-      // Block 0 first; the rest only if they could be closer (or within the cap).
-      double exact[8];
-      for (uint32_t first = 0; first < state.count; first += 8) {
-        if (first > 0 && state.block_lower[first / 8] - moved > std::min(std::sqrt(best2), within) * (1 + 1e-9)) break;
-        const uint32_t lanes = std::min<uint32_t>(8, state.count - first);
-        gatherTriangleBlock(mesh.triangles.data(), g.positions, state.faces + first, lanes, gather_);
-        squaredDistancesToBlock(p, gather_, exact);
-        counters_.triangles_tested += lanes;
-        for (uint32_t lane = 0; lane < lanes; ++lane) {
-          const TriangleIndex f = state.faces[first + lane];
-          if (exact[lane] < best2 || (exact[lane] == best2 && f < face)) { best2 = exact[lane]; face = f; }
-        }
-      }
-      // Every face outside the set is at least reach - moved away: nothing there is closer
-      // than the best candidate, or within the cap when no candidate is.
-      certified = std::min(std::sqrt(best2), within) + moved < state.reach * (1 - 1e-9);
-      if (certified && !(best2 <= within2)) face = kInvalidIndex;
-    }
+    certified = testSet(state, p, moved, within, best2, face);
   }
   if (!certified) {
     // Start from the best face of the set just tested (no distance to recompute), else the
@@ -618,15 +655,31 @@ ClosestPoint QueryStream::closestCoherent(const Vec3& p, CoherentState& state, b
       // A stationary point still gets a certificate: a reach of at least 1e-6 of the mesh size.
       const double reach = 2.0 * std::max(static_cast<double>(state.reach_steps) * state.mean_step,
                                           1e-6 / g.box_scale);
-      const double set_reach = gatherCandidates(p, start2, reach, kCoherentSetSize, face, true);
-      for (uint32_t b = 0; b < kCoherentSetSize / 8; ++b)
-        state.block_lower[b] = 8 * b < gathered_.size() ? std::nextafter(static_cast<float>(std::sqrt(gathered_[8 * b].first)), 0.0f) : kFloatInf;
-      state.count = static_cast<uint32_t>(gathered_.size());
-      for (uint32_t i = 0; i < state.count; ++i) state.faces[i] = gathered_[i].second;
-      state.anchor = p;
-      state.reach = set_reach;
-      state.drift_at = g.drift;
-      state.has_set = set_reach > 0;  // infinite: every face is in the set
+      // Gathered lead_steps mean steps ahead, the set lasts about twice as long on a steady
+      // path (on a path that turns back the mean velocity, and the lead, shrink); p must still
+      // be certified by it, else the set is gathered at p.
+      const Vec3 lead = static_cast<double>(state.lead_steps) * state.mean_velocity.cast<double>();
+      const double ahead = same_lineage ? lead.norm() : 0.0;
+      bool answered = false;
+      if (ahead > 0 && ahead < reach) {
+        const Vec3 anchor = p + lead;
+        double anchor2 = within2;
+        TriangleIndex anchor_face = kInvalidIndex;
+        if (face != kInvalidIndex) {
+          const Triangle& t = mesh.triangles[face];
+          const double d2 = squaredDistanceToTriangle(anchor, g.positions[t[0]], g.positions[t[1]], g.positions[t[2]]);
+          if (d2 < anchor2) {
+            anchor2 = d2;
+            anchor_face = face;
+          }
+        }
+        storeSet(anchor, gatherCandidates(anchor, anchor2, reach, kCoherentSetSize, anchor_face, true), g.drift, state);
+        double set2 = kInf;
+        TriangleIndex set_best = kInvalidIndex;
+        answered = state.has_set && testSet(state, p, (p - anchor).norm(), within, set2, set_best);
+        if (answered) face = set_best;
+      }
+      if (!answered) storeSet(p, gatherCandidates(p, start2, reach, kCoherentSetSize, face, true), g.drift, state);
     } else {
       depthFirst(p, start2, 0, face);
     }

@@ -71,7 +71,7 @@ struct CoherenceCounters {
 // faces, tested eight at a time. It stays valid while the geometry moves within its lineage
 // (TreeGeometry::lineage, ::drift): a deforming body's faces are re-read at their current
 // positions and the certificate shrinks by how far they may have moved.
-inline constexpr uint32_t kCoherentSetSize = 32;
+inline constexpr uint32_t kCoherentSetSize = 48;
 struct CoherentState {
   Vec3 anchor = Vec3::Zero();        // where the candidate set was gathered
   double reach = 0;                  // every face outside the set was at least this far from anchor
@@ -82,8 +82,11 @@ struct CoherentState {
   uint32_t count = 0;                // candidate faces
   float mean_step = 0;               // running mean of the point's motion relative to the mesh
   float reach_steps = 2;             // R = reach_steps * mean_step (see CoherenceOptions); 0: no set
+  float lead_steps = 3;              // a set is gathered this many mean steps ahead of the point,
+                                     // along mean_velocity (when within 2 R; 0: at the point)
   bool has_set = false;              // anchor, reach and faces hold a certificate
   Vec3 last_point = Vec3::Zero();
+  Eigen::Vector3f mean_velocity = Eigen::Vector3f::Zero();  // running mean of the point's steps
   TriangleIndex faces[kCoherentSetSize];        // candidates, in blocks of eight
   float block_lower[kCoherentSetSize / 8] = {};  // faces[8b..count) were at least this far
 };
@@ -188,6 +191,9 @@ class QueryStream {
   double gatherCandidates(const Vec3& p, double start2, double reach, uint32_t capacity,
                           TriangleIndex& best_face, bool sorted = false);
   void orderIntoBlocks(float* block_lower, size_t blocks);
+  void storeSet(const Vec3& anchor, double set_reach, double drift, CoherentState& state) const;
+  bool testSet(const CoherentState& state, const Vec3& p, double moved, double within, double& best2,
+               TriangleIndex& face);
   double depthFirst(const Vec3& p, double start2, double reach, TriangleIndex& best_face,
                     uint32_t capacity = 0);
   double entryBound(const DriftEntry& e, const Vec3& p, const float q[3], bool far) const;

@@ -6,6 +6,7 @@
 //   kClosestCoherent(p, 5)                     distances == bruteForceKClosest;
 //   closestCoherent(p, CoherentState)          (caller-held compact state) == brute force;
 //   closestCoherent(p, CoherentState, cap)     == brute force within the cap, else no face;
+//   sets a compact state gathers ahead of its point (lead_steps) hold their certificate;
 //   a warm (coherent) answer equals a cold one (a fresh QueryStream::closest).
 // Paths (fixed seeds) on armadillo, holes, a torus, an icosphere and a random soup: steps of
 // 0.05% and 0.5% of the bounding-box diagonal, points 0-5% of the diagonal from the surface,
@@ -474,6 +475,53 @@ TEST_CASE("coherent queries: capped compact states", "[coherent]") {
     CHECK(hits > 100);
     CHECK(nones > 100);
     CHECK(certified_steps > 100);
+  }
+}
+
+// A compact state gathers its set lead_steps of the point's last steps ahead of it (the point
+// must still be certified by that set, else it is gathered at the point). Along a steady path
+// over a torus, and along one that turns back every 7 steps, the answers stay exact, every set
+// gathered holds its certificate (brute force), and on the steady path the sets gathered ahead
+// last longer than sets gathered at the point.
+TEST_CASE("coherent queries: sets gathered ahead of a moving point", "[coherent]") {
+  const Mesh mesh = scenes::torus(1.0, 0.3, 96, 48);
+  const auto h = Hierarchy::build(mesh);
+  const Checker checker{mesh, meshDiagonal(mesh)};
+  QueryStream stream(h);
+  for (bool zigzag : {false, true}) {
+    INFO((zigzag ? "turning back every 7 steps" : "steady path"));
+    size_t rebuilds[2] = {0, 0}, ahead[2] = {0, 0}, certified_steps[2] = {0, 0};
+    for (int lead = 0; lead < 2; ++lead) {
+      INFO("lead_steps " << (lead ? 3 : 0));
+      CoherentState state;
+      state.lead_steps = lead ? 3.0f : 0.0f;
+      Failures f("closestCoherent(p, CoherentState) with sets gathered ahead");
+      Failures sets("a set gathered ahead: sorted, block bounds, certificate (brute force)");
+      // Over the top of the tube, along the ring, 0.002 a step, bobbing 0.01-0.015 above it.
+      double angle = 0;
+      for (int i = 0; i < 600; ++i) {
+        angle += zigzag && (i / 7) % 2 ? -0.002 : 0.002;
+        const double height = 0.3 + 0.0125 + 0.0025 * std::sin(0.05 * i);
+        const Vec3 p(std::cos(angle), std::sin(angle), height);
+        INFO("step " << i << ", point " << text(p));
+        bool certified = false;
+        const ClosestPoint r = stream.closestCoherent(p, state, &certified);
+        checker.exact(r, p, Truth{bruteForceKClosest(mesh, p, 1)}, f);
+        certified_steps[lead] += certified;
+        if (certified) continue;
+        ++rebuilds[lead];
+        if (!state.has_set) continue;
+        checkSet(mesh, state, sets);
+        ahead[lead] += state.anchor != p;
+      }
+    }
+    INFO("rebuilds " << rebuilds[0] << " at the point, " << rebuilds[1] << " with lead_steps 3 (" << ahead[1]
+                     << " sets gathered ahead)");
+    CHECK(ahead[0] == 0);
+    CHECK(ahead[1] > 0);
+    CHECK(certified_steps[0] > 300);
+    CHECK(certified_steps[1] > 300);
+    if (!zigzag) CHECK(rebuilds[1] < rebuilds[0]);
   }
 }
 

@@ -618,6 +618,7 @@ TEST_CASE("bad input: NaN points, stale handles, wrong sizes, wrong kinds", "[se
   const std::vector<std::vector<Vec3>> frames = {sphere.positions};
   const BodyHandle keyframed = service.addKeyframed(hierarchy, frames);
   const double nan = std::numeric_limits<double>::quiet_NaN();
+  const float nan_f = std::numeric_limits<float>::quiet_NaN();
 
   SECTION("NaN and infinite points get a per-point status and no hits; the others are answered") {
     PointMatrix points(20, 3);
@@ -637,6 +638,16 @@ TEST_CASE("bad input: NaN points, stale handles, wrong sizes, wrong kinds", "[se
         }
       }
     }
+  }
+  SECTION("bad options") {
+    for (float bad : {-1.0f, nan_f, std::numeric_limits<float>::infinity()}) {
+      ServiceOptions reach, lead;
+      reach.reach_steps = bad;
+      lead.lead_steps = bad;
+      CHECK_THROWS_WITH(DistanceService(reach), Catch::Contains("reach_steps"));
+      CHECK_THROWS_WITH(DistanceService(lead), Catch::Contains("lead_steps"));
+    }
+    CHECK_THROWS_WITH(DistanceService(ServiceOptions{1, 0}), Catch::Contains("block_size"));
   }
   SECTION("bad max distance") {
     const PointMatrix points = PointMatrix::Zero(2, 3);
