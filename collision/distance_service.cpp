@@ -609,16 +609,19 @@ PositionsUpdate DistanceService::setPositions(BodyHandle body, const std::vector
   // them all (kInlineFacesOn, kInlineFacesOff).
   const double per_leaf = static_cast<double>(b.leaves_tested) / b.deforming->hierarchy()->leafCount();
   b.deforming->setInlineFaces(per_leaf >= (b.deforming->inlineFaces() ? kInlineFacesOff : kInlineFacesOn));
-  // Throws (body unchanged) on a wrong count or a non-finite position.
-  const DisplacementCheck check = b.deforming->setPositions(positions);
+  // Throws (body unchanged) on a wrong count or a non-finite position. In the service's arena:
+  // the inline faces' refresh runs on its threads.
   PositionsUpdate update;
-  if (!check.accepted) {
-    b.deforming->anchor(positions);
-    b.deforming->inflate(b.displacement_bound);
-    update.reanchored = true;
-    update.worst_vertex = check.worst_vertex;
-    update.excess = check.excess;
-  }
+  impl_->arena->execute([&] {
+    const DisplacementCheck check = b.deforming->setPositions(positions);
+    if (!check.accepted) {
+      b.deforming->anchor(positions);
+      b.deforming->inflate(b.displacement_bound);
+      update.reanchored = true;
+      update.worst_vertex = check.worst_vertex;
+      update.excess = check.excess;
+    }
+  });
   b.box_dirty = true;
   return update;
 }
@@ -628,8 +631,10 @@ void DistanceService::setDisplacementBound(BodyHandle body, double displacement_
   if (!(displacement_bound >= 0) || !std::isfinite(displacement_bound))
     throw std::invalid_argument("DistanceService::setDisplacementBound: the bound must be finite and >= 0");
   const std::vector<Vec3> current = b.deforming->positions();
-  b.deforming->anchor(current);
-  b.deforming->inflate(displacement_bound);
+  impl_->arena->execute([&] {
+    b.deforming->anchor(current);
+    b.deforming->inflate(displacement_bound);
+  });
   b.displacement_bound = displacement_bound;
 }
 

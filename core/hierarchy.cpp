@@ -6,6 +6,7 @@
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
+#include <array>
 #include <atomic>
 #include <cmath>
 #include <limits>
@@ -238,27 +239,38 @@ void fillLeafBlocks(const Hierarchy& h, const Vec3* positions, std::vector<Trian
   const Triangle* triangles = h.mesh().triangles.data();
   const TriangleIndex* lanes = h.leafTriangles().data();
   blocks.resize(h.leafCount());
-  for (uint32_t leaf = 0; leaf < blocks.size(); ++leaf)
-    gatherTriangleBlock(triangles, positions, lanes + 8 * static_cast<size_t>(leaf),
-                        h.leafLanes(static_cast<int32_t>(leaf)), blocks[leaf]);
+  tbb::parallel_for(tbb::blocked_range<size_t>(0, blocks.size(), 256), [&](const tbb::blocked_range<size_t>& range) {
+    for (size_t leaf = range.begin(); leaf < range.end(); ++leaf)
+      gatherTriangleBlock(triangles, positions, lanes + 8 * leaf, h.leafLanes(static_cast<int32_t>(leaf)), blocks[leaf]);
+  });
 }
 
 void refitBoxes(const Hierarchy& h, const TriangleBlock8* blocks, double extent, std::vector<Node8>& nodes) {
   const double scale = h.boxScale();
   const Vec3& center = h.center();
   const float margin = boxMargin(extent);
+  // The leaves' boxes in parallel (they read every block), then the bottom-up pass.
+  std::vector<std::array<float, 6>> leaf_boxes(h.leafCount());
+  tbb::parallel_for(tbb::blocked_range<size_t>(0, leaf_boxes.size(), 256), [&](const tbb::blocked_range<size_t>& range) {
+    for (size_t leaf = range.begin(); leaf < range.end(); ++leaf) {
+      // Unused lanes copy a used one, so all 8 lanes of each corner count.
+      const TriangleBlock8& b = blocks[leaf];
+      for (int axis = 0; axis < 3; ++axis) {
+        double low = b.v[0][axis][0], high = low;
+        for (int corner = 0; corner < 3; ++corner)
+          for (int lane = 0; lane < 8; ++lane) {
+            low = std::min(low, b.v[corner][axis][lane]);
+            high = std::max(high, b.v[corner][axis][lane]);
+          }
+        leaf_boxes[leaf][axis] = floatBelow((low - center[axis]) * scale) - margin;
+        leaf_boxes[leaf][3 + axis] = floatAbove((high - center[axis]) * scale) + margin;
+      }
+    }
+  });
   refitSlotBoxes(nodes, [&](int32_t leaf, float lo[3], float hi[3]) {
-    // Unused lanes copy a used one, so all 8 lanes of each corner count.
-    const TriangleBlock8& b = blocks[leaf];
     for (int axis = 0; axis < 3; ++axis) {
-      double low = b.v[0][axis][0], high = low;
-      for (int corner = 0; corner < 3; ++corner)
-        for (int lane = 0; lane < 8; ++lane) {
-          low = std::min(low, b.v[corner][axis][lane]);
-          high = std::max(high, b.v[corner][axis][lane]);
-        }
-      lo[axis] = floatBelow((low - center[axis]) * scale) - margin;
-      hi[axis] = floatAbove((high - center[axis]) * scale) + margin;
+      lo[axis] = leaf_boxes[leaf][axis];
+      hi[axis] = leaf_boxes[leaf][3 + axis];
     }
   });
 }

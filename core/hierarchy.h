@@ -162,12 +162,14 @@ LeafVertices leafVertices(const Hierarchy& h);
 
 // Fills `blocks` (resized to h.leafCount()) with each leaf block's faces at `positions` (one
 // per mesh vertex), laid out as Hierarchy::leafBlocks(): moving geometry with inline faces.
+// Parallel over the leaves (TBB, in the caller's task arena).
 void fillLeafBlocks(const Hierarchy& h, const Vec3* positions, std::vector<TriangleBlock8>& blocks);
 
 // Rewrites every slot's box in `nodes` (over h's layout) as the box of its subtree's faces in
 // `blocks` (one per leaf, as fillLeafBlocks leaves them), rounded outward, widened by
-// boxMargin(extent); `extent` must bound the faces' largest |scaled coordinate|. One bottom-up
-// pass reading only the blocks; eps and the rest of each node are kept.
+// boxMargin(extent); `extent` must bound the faces' largest |scaled coordinate|. The leaves'
+// boxes in parallel (TBB, in the caller's task arena), then one bottom-up pass; reads only
+// the blocks; eps and the rest of each node are kept.
 void refitBoxes(const Hierarchy& h, const TriangleBlock8* blocks, double extent, std::vector<Node8>& nodes);
 
 // How far each slot's bounds can be pushed when every vertex v moves at most w[v] (w >= 0,
