@@ -187,6 +187,26 @@ struct DistanceService::Impl {
     return b;
   }
 
+  // A deforming body's new positions (checked by DeformingBody::setPositions: a wrong count or
+  // a non-finite coordinate throws, the body unchanged), re-anchored past its bound.
+  PositionsUpdate applyPositions(Body& b, const std::vector<Vec3>& positions) {
+    // Inline faces when the last step's queries tested enough leaf blocks to pay for refreshing
+    // them all (kInlineFacesOn, kInlineFacesOff).
+    const double per_leaf = static_cast<double>(b.leaves_tested) / b.deforming->hierarchy()->leafCount();
+    b.deforming->setInlineFaces(per_leaf >= (b.deforming->inlineFaces() ? kInlineFacesOff : kInlineFacesOn));
+    const DisplacementCheck check = b.deforming->setPositions(positions);
+    PositionsUpdate update;
+    if (!check.accepted) {
+      b.deforming->anchor(positions);
+      b.deforming->inflate(b.displacement_bound);
+      update.reanchored = true;
+      update.worst_vertex = check.worst_vertex;
+      update.excess = check.excess;
+    }
+    b.box_dirty = true;
+    return update;
+  }
+
   BodyHandle add(Body&& b) {
     uint32_t slot;
     if (!free_slots.empty()) {
@@ -605,25 +625,50 @@ PositionsUpdate DistanceService::setPositions(BodyHandle body, PointsRef positio
 
 PositionsUpdate DistanceService::setPositions(BodyHandle body, const std::vector<Vec3>& positions) {
   Body& b = impl_->body(body, "setPositions", BodyKind::kDeforming);
-  // Inline faces when the last step's queries tested enough leaf blocks to pay for refreshing
-  // them all (kInlineFacesOn, kInlineFacesOff).
-  const double per_leaf = static_cast<double>(b.leaves_tested) / b.deforming->hierarchy()->leafCount();
-  b.deforming->setInlineFaces(per_leaf >= (b.deforming->inlineFaces() ? kInlineFacesOff : kInlineFacesOn));
-  // Throws (body unchanged) on a wrong count or a non-finite position. In the service's arena:
-  // the inline faces' refresh runs on its threads.
+  // In the service's arena: the inline faces' refresh runs on its threads.
   PositionsUpdate update;
-  impl_->arena->execute([&] {
-    const DisplacementCheck check = b.deforming->setPositions(positions);
-    if (!check.accepted) {
-      b.deforming->anchor(positions);
-      b.deforming->inflate(b.displacement_bound);
-      update.reanchored = true;
-      update.worst_vertex = check.worst_vertex;
-      update.excess = check.excess;
-    }
-  });
-  b.box_dirty = true;
+  impl_->arena->execute([&] { update = impl_->applyPositions(b, positions); });
   return update;
+}
+
+std::vector<PositionsUpdate> DistanceService::setPositions(const std::vector<BodyPositions>& batch) {
+  // Every entry checked before any body changes.
+  std::vector<Body*> targets(batch.size());
+  std::vector<uint32_t> slots(batch.size());
+  for (size_t i = 0; i < batch.size(); ++i) {
+    Body& b = impl_->body(batch[i].body, "setPositions", BodyKind::kDeforming);
+    const std::string entry = "DistanceService::setPositions: batch entry " + std::to_string(i) + " (body " +
+                              std::to_string(batch[i].body.index) + ")";
+    if (!batch[i].positions) throw std::invalid_argument(entry + ": null positions");
+    const size_t expected = b.deforming->positions().size();
+    if (batch[i].positions->size() != expected)
+      throw std::invalid_argument(entry + ": " + std::to_string(batch[i].positions->size()) +
+                                  " positions, the mesh has " + std::to_string(expected) + " vertices");
+    targets[i] = &b;
+    slots[i] = batch[i].body.index;
+  }
+  std::sort(slots.begin(), slots.end());
+  const auto repeated = std::adjacent_find(slots.begin(), slots.end());
+  if (repeated != slots.end())
+    throw std::invalid_argument("DistanceService::setPositions: body " + std::to_string(*repeated) +
+                                " appears twice in the batch");
+  std::vector<PositionsUpdate> updates(batch.size());
+  impl_->arena->execute([&] {
+    // Non-finite coordinates first (read-only), so an error leaves every body unchanged.
+    std::vector<uint8_t> finite(batch.size(), 1);
+    tbb::parallel_for(size_t{0}, batch.size(), [&](size_t i) {
+      bool ok = true;
+      for (const Vec3& x : *batch[i].positions) ok &= x.allFinite();
+      finite[i] = ok;
+    });
+    for (size_t i = 0; i < batch.size(); ++i)
+      if (!finite[i])
+        throw std::invalid_argument("DistanceService::setPositions: batch entry " + std::to_string(i) + " (body " +
+                                    std::to_string(batch[i].body.index) + ") has a non-finite position");
+    tbb::parallel_for(size_t{0}, batch.size(),
+                      [&](size_t i) { updates[i] = impl_->applyPositions(*targets[i], *batch[i].positions); });
+  });
+  return updates;
 }
 
 void DistanceService::setDisplacementBound(BodyHandle body, double displacement_bound) {

@@ -163,6 +163,13 @@ struct PositionsUpdate {
   double excess = 0;                         // reanchored: how far past its bound it was
 };
 
+// One entry of a batched setPositions(): a deforming body and its new positions (one per mesh
+// vertex; read during the call only).
+struct BodyPositions {
+  BodyHandle body;
+  const std::vector<Vec3>* positions = nullptr;
+};
+
 struct ServiceOptions {
   // Threads of the service's task arena; 0 = TBB's default (all cores). See setThreads().
   unsigned threads = 0;
@@ -236,6 +243,12 @@ class DistanceService {
   // non-finite coordinate; the body is then unchanged).
   PositionsUpdate setPositions(BodyHandle body, PointsRef positions);
   PositionsUpdate setPositions(BodyHandle body, const std::vector<Vec3>& positions);
+  // kDeforming, several bodies at once: the same as setPositions(b.body, *b.positions) for
+  // each entry (result i for entry i), the bodies updated in parallel on the service's threads.
+  // Every entry is checked before any body changes (std::invalid_argument for a stale handle, a
+  // body that is not deforming or appears twice, a null or wrong-sized positions vector, a
+  // non-finite coordinate): on an error no body of the batch has changed.
+  std::vector<PositionsUpdate> setPositions(const std::vector<BodyPositions>& batch);
   // kDeforming: changes the displacement bound and re-anchors at the current positions.
   void setDisplacementBound(BodyHandle body, double displacement_bound);
   // kDeforming: whether the body keeps inline faces (DeformingBody::setInlineFaces). Each

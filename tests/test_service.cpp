@@ -609,6 +609,89 @@ TEST_CASE("shared tables: hierarchyFor caches by mesh, shapes shared per hierarc
   CHECK(service.bodies().size() == 3);
 }
 
+// A batched setPositions equals one body at a time: two services with the same world (three
+// deforming bodies of two meshes, one rigid), one updated body by body, the other in one batch
+// (2 threads), give bitwise identical steps and updates, re-anchoring included; a bad entry
+// throws before any body of the batch changes.
+TEST_CASE("batched setPositions equals one body at a time; bad batches change nothing", "[service]") {
+  const Mesh sphere = scenes::icosphere(3);
+  const Mesh torus = scenes::torus(1.0, 0.3, 48, 24);
+  DistanceService single(ServiceOptions{1, 32}), batched(ServiceOptions{2, 32});
+  struct Deforming {
+    const Mesh* mesh;
+    Vec3 center;
+    BodyHandle a, b;  // in single, in batched
+  };
+  std::vector<Deforming> bodies = {{&sphere, Vec3(0, 0, 0), {}, {}},
+                                   {&torus, Vec3(3, 0, 0), {}, {}},
+                                   {&sphere, Vec3(0, 3, 0), {}, {}}};
+  for (Deforming& d : bodies) {
+    std::vector<Vec3> at(d.mesh->positions.size());
+    for (size_t v = 0; v < at.size(); ++v) at[v] = d.mesh->positions[v] + d.center;
+    d.a = single.addDeforming(single.hierarchyFor(*d.mesh), 0.05, at);
+    d.b = batched.addDeforming(batched.hierarchyFor(*d.mesh), 0.05, at);
+  }
+  single.addRigid(single.hierarchyFor(torus), makePose(0.3, Vec3::UnitZ(), Vec3(3, 3, 0)));
+  const BodyHandle rigid = batched.addRigid(batched.hierarchyFor(torus), makePose(0.3, Vec3::UnitZ(), Vec3(3, 3, 0)));
+  std::vector<Vec3> points;
+  for (const Deforming& d : bodies)
+    for (const Vec3& x : scenes::nearSurfacePoints(*d.mesh, 300, 0.1, 5)) points.push_back(x + d.center);
+  std::vector<std::vector<Vec3>> positions(bodies.size());
+  Failures same("batched setPositions vs one body at a time");
+  StepResult ra, rb;
+  for (int step = 0; step < 12; ++step) {
+    INFO("step " << step);
+    // Step 8 moves the torus far past its bound: it re-anchors in both services.
+    std::vector<BodyPositions> batch;
+    std::vector<PositionsUpdate> expected;
+    for (size_t k = 0; k < bodies.size(); ++k) {
+      const double amplitude = step == 8 && k == 1 ? 0.3 : 0.01;
+      std::vector<Vec3> rest(bodies[k].mesh->positions.size());
+      for (size_t v = 0; v < rest.size(); ++v) rest[v] = bodies[k].mesh->positions[v] + bodies[k].center;
+      positions[k] = wave(rest, bodies[k].center, amplitude, 0.4 * step);
+      expected.push_back(single.setPositions(bodies[k].a, positions[k]));
+      batch.push_back({bodies[k].b, &positions[k]});
+    }
+    const std::vector<PositionsUpdate> updates = batched.setPositions(batch);
+    REQUIRE(updates.size() == bodies.size());
+    if (step == 8) CHECK(updates[1].reanchored);
+    for (size_t k = 0; k < bodies.size(); ++k) {
+      CHECK(updates[k].reanchored == expected[k].reanchored);
+      CHECK(updates[k].worst_vertex == expected[k].worst_vertex);
+      CHECK(updates[k].excess == expected[k].excess);
+      CHECK(batched.positions(bodies[k].b) == positions[k]);
+      CHECK(batched.positions(bodies[k].b) == single.positions(bodies[k].a));
+    }
+    single.step(toMatrix(points), 0.2, QueryMode::kClosest, ra);
+    batched.step(toMatrix(points), 0.2, QueryMode::kClosest, rb);
+    checkIdentical(ra, rb, same);
+    CHECK(ra.stats().hits > 100);
+  }
+  // Bad batches: nothing changes.
+  const std::vector<Vec3> before0 = batched.positions(bodies[0].b), before1 = batched.positions(bodies[1].b);
+  std::vector<Vec3> moved0 = before0, moved1 = before1;
+  for (Vec3& x : moved0) x.z() += 0.01;
+  for (Vec3& x : moved1) x.z() += 0.01;
+  std::vector<Vec3> with_nan = moved1;
+  with_nan[7].y() = std::numeric_limits<double>::quiet_NaN();
+  const std::vector<Vec3> short_positions(moved1.begin(), moved1.end() - 1);
+  auto expectUnchanged = [&](const std::vector<BodyPositions>& batch, const char* message) {
+    INFO(message);
+    CHECK_THROWS_WITH(batched.setPositions(batch), Catch::Contains(message));
+    CHECK(batched.positions(bodies[0].b) == before0);
+    CHECK(batched.positions(bodies[1].b) == before1);
+  };
+  expectUnchanged({{bodies[0].b, &moved0}, {bodies[1].b, &with_nan}}, "non-finite");
+  expectUnchanged({{bodies[0].b, &moved0}, {bodies[1].b, &short_positions}}, "vertices");
+  expectUnchanged({{bodies[0].b, &moved0}, {bodies[0].b, &moved0}}, "appears twice");
+  expectUnchanged({{bodies[0].b, &moved0}, {bodies[1].b, nullptr}}, "null positions");
+  expectUnchanged({{bodies[0].b, &moved0}, {rigid, &moved1}}, "not deforming");
+  expectUnchanged({{bodies[0].b, &moved0}, {BodyHandle{}, &moved1}}, "stale body handle");
+  CHECK(batched.setPositions(std::vector<BodyPositions>{}).empty());
+  CHECK(batched.setPositions({{bodies[0].b, &moved0}, {bodies[1].b, &moved1}}).size() == 2);
+  CHECK(batched.positions(bodies[1].b) == moved1);
+}
+
 TEST_CASE("bad input: NaN points, stale handles, wrong sizes, wrong kinds", "[service][errors]") {
   DistanceService service(ServiceOptions{2, 8});
   const Mesh sphere = scenes::icosphere(2);
