@@ -478,11 +478,13 @@ TEST_CASE("coherent queries: capped compact states", "[coherent]") {
   }
 }
 
-// A compact state gathers its set lead_steps of the point's last steps ahead of it (the point
-// must still be certified by that set, else it is gathered at the point). Along a steady path
-// over a torus, and along one that turns back every 7 steps, the answers stay exact, every set
+// A compact state gathers its set lead_steps mean steps ahead of the point (the point must
+// still be certified by that set, else it is gathered at the point). Along a steady path over
+// a torus, and along one that turns back every 7 steps, the answers stay exact, every set
 // gathered holds its certificate (brute force), and on the steady path the sets gathered ahead
-// last longer than sets gathered at the point.
+// last longer than sets gathered at the point. (On the path that turns back, how many sets
+// are rebuilt depends on where the first ones happen to be anchored, with or without a lead:
+// not compared.)
 TEST_CASE("coherent queries: sets gathered ahead of a moving point", "[coherent]") {
   const Mesh mesh = scenes::torus(1.0, 0.3, 96, 48);
   const auto h = Hierarchy::build(mesh);
