@@ -68,7 +68,9 @@ struct CoherenceCounters {
 // zero-initialised (default-constructed) means a cold start. Used with
 // QueryStream::closestCoherent(p, state, ...), where the stream lends its scratch memory; the
 // state keeps only the certificate: an anchor, a reach and up to kCoherentSetSize candidate
-// faces, tested eight at a time. It stays valid while the geometry moves within its lineage
+// faces sorted by distance from the anchor, tested eight at a time. The anchor is the point
+// where the set was rebuilt, or lead_steps of its mean steps ahead of it (the point must then
+// be certified by the new set too). It stays valid while the geometry moves within its lineage
 // (TreeGeometry::lineage, ::drift): a deforming body's faces are re-read at their current
 // positions and the certificate shrinks by how far they may have moved.
 inline constexpr uint32_t kCoherentSetSize = 48;
@@ -88,7 +90,7 @@ struct CoherentState {
   Vec3 last_point = Vec3::Zero();
   Eigen::Vector3f mean_velocity = Eigen::Vector3f::Zero();  // running mean of the point's steps
   TriangleIndex faces[kCoherentSetSize];        // candidates, in blocks of eight
-  float block_lower[kCoherentSetSize / 8] = {};  // faces[8b..count) were at least this far
+  float block_lower[kCoherentSetSize / 8] = {};  // faces[8b..count) were at least this far from anchor
 };
 
 // One entry of the dynamic front, for pictures and diagnostics: the triangle whose swept
