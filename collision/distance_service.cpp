@@ -632,18 +632,20 @@ PositionsUpdate DistanceService::setPositions(BodyHandle body, const std::vector
 }
 
 std::vector<PositionsUpdate> DistanceService::setPositions(const std::vector<BodyPositions>& batch) {
+  auto error = [&](size_t i, const std::string& what) {
+    return std::invalid_argument("DistanceService::setPositions: batch entry " + std::to_string(i) + " (body " +
+                                 std::to_string(batch[i].body.index) + ")" + what);
+  };
   // Every entry checked before any body changes.
   std::vector<Body*> targets(batch.size());
   std::vector<uint32_t> slots(batch.size());
   for (size_t i = 0; i < batch.size(); ++i) {
     Body& b = impl_->body(batch[i].body, "setPositions", BodyKind::kDeforming);
-    const std::string entry = "DistanceService::setPositions: batch entry " + std::to_string(i) + " (body " +
-                              std::to_string(batch[i].body.index) + ")";
-    if (!batch[i].positions) throw std::invalid_argument(entry + ": null positions");
+    if (!batch[i].positions) throw error(i, ": null positions");
     const size_t expected = b.deforming->positions().size();
     if (batch[i].positions->size() != expected)
-      throw std::invalid_argument(entry + ": " + std::to_string(batch[i].positions->size()) +
-                                  " positions, the mesh has " + std::to_string(expected) + " vertices");
+      throw error(i, ": " + std::to_string(batch[i].positions->size()) + " positions, the mesh has " +
+                         std::to_string(expected) + " vertices");
     targets[i] = &b;
     slots[i] = batch[i].body.index;
   }
@@ -662,9 +664,7 @@ std::vector<PositionsUpdate> DistanceService::setPositions(const std::vector<Bod
       finite[i] = ok;
     });
     for (size_t i = 0; i < batch.size(); ++i)
-      if (!finite[i])
-        throw std::invalid_argument("DistanceService::setPositions: batch entry " + std::to_string(i) + " (body " +
-                                    std::to_string(batch[i].body.index) + ") has a non-finite position");
+      if (!finite[i]) throw error(i, " has a non-finite position");
     tbb::parallel_for(size_t{0}, batch.size(),
                       [&](size_t i) { updates[i] = impl_->applyPositions(*targets[i], *batch[i].positions); });
   });

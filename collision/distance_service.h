@@ -180,9 +180,9 @@ struct ServiceOptions {
   // the step includes how far the faces moved): larger means fewer rebuilds but larger sets.
   // Answers never depend on it.
   float reach_steps = 2;
-  // A state's set is gathered lead_steps of the point's last steps ahead of it (when that is
-  // within 2 R): on a steady path the set lasts about twice as long (CoherentState::lead_steps;
-  // 0: gathered at the point). Answers never depend on it.
+  // A state's set is gathered lead_steps of the point's mean steps ahead of it, along its mean
+  // velocity (when that is within 2 R): on a steady path the set lasts about twice as long
+  // (CoherentState::lead_steps; 0: gathered at the point). Answers never depend on it.
   float lead_steps = 3;
 };
 

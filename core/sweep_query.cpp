@@ -251,6 +251,12 @@ uint32_t QueryStream::testLeaf(int32_t leaf, const Vec3& p, double out[8]) {
   return used;
 }
 
+double QueryStream::squaredDistanceToFace(TriangleIndex face, const Vec3& p) const {
+  const Vec3* x = geometry().positions;
+  const Triangle& t = hierarchy_->mesh().triangles[face];
+  return squaredDistanceToTriangle(p, x[t[0]], x[t[1]], x[t[2]]);
+}
+
 TriangleHit QueryStream::hitOn(TriangleIndex face, const Vec3& p) const {
   const Vec3* x = geometry().positions;
   const Triangle& t = hierarchy_->mesh().triangles[face];
@@ -512,8 +518,7 @@ ClosestPoint QueryStream::closestCoherent(const Vec3& p) {
     double start2 = kInf;
     face = kInvalidIndex;
     if (has_last_ && last_face_ != kInvalidIndex && set_version_ == g.version) {
-      const Triangle& t = hierarchy_->mesh().triangles[last_face_];
-      start2 = squaredDistanceToTriangle(p, g.positions[t[0]], g.positions[t[1]], g.positions[t[2]]);
+      start2 = squaredDistanceToFace(last_face_, p);
       face = last_face_;
     }
     const double set_reach = gatherCandidates(p, start2, reach, options_.max_candidates, face);
@@ -546,15 +551,16 @@ ClosestPoint QueryStream::closestCoherent(const Vec3& p) {
   return out;
 }
 
-// The set of a compact state from gathered_ (sorted by distance from anchor), with its reach.
-void QueryStream::storeSet(const Vec3& anchor, double set_reach, double drift, CoherentState& state) const {
+// The set of a compact state from gathered_ (sorted by distance from anchor), with its reach,
+// at the geometry's current drift.
+void QueryStream::storeSet(const Vec3& anchor, double set_reach, CoherentState& state) const {
   for (uint32_t b = 0; b < kCoherentSetSize / 8; ++b)
     state.block_lower[b] = 8 * b < gathered_.size() ? std::nextafter(static_cast<float>(std::sqrt(gathered_[8 * b].first)), 0.0f) : kFloatInf;
   state.count = static_cast<uint32_t>(gathered_.size());
   for (uint32_t i = 0; i < state.count; ++i) state.faces[i] = gathered_[i].second;
   state.anchor = anchor;
   state.reach = set_reach;
-  state.drift_at = drift;
+  state.drift_at = geometry().drift;
   state.has_set = set_reach > 0;  // infinite: every face is in the set
 }
 
@@ -643,8 +649,7 @@ ClosestPoint QueryStream::closestCoherent(const Vec3& p, CoherentState& state, b
         face = set_face;
       }
     } else if (same_lineage && state.last_face < mesh.triangles.size()) {
-      const Triangle& t = mesh.triangles[state.last_face];
-      const double last2 = squaredDistanceToTriangle(p, g.positions[t[0]], g.positions[t[1]], g.positions[t[2]]);
+      const double last2 = squaredDistanceToFace(state.last_face, p);
       if (last2 < start2) {
         start2 = last2;
         face = state.last_face;
@@ -666,20 +671,19 @@ ClosestPoint QueryStream::closestCoherent(const Vec3& p, CoherentState& state, b
         double anchor2 = within2;
         TriangleIndex anchor_face = kInvalidIndex;
         if (face != kInvalidIndex) {
-          const Triangle& t = mesh.triangles[face];
-          const double d2 = squaredDistanceToTriangle(anchor, g.positions[t[0]], g.positions[t[1]], g.positions[t[2]]);
+          const double d2 = squaredDistanceToFace(face, anchor);
           if (d2 < anchor2) {
             anchor2 = d2;
             anchor_face = face;
           }
         }
-        storeSet(anchor, gatherCandidates(anchor, anchor2, reach, kCoherentSetSize, anchor_face, true), g.drift, state);
+        storeSet(anchor, gatherCandidates(anchor, anchor2, reach, kCoherentSetSize, anchor_face, true), state);
         double set2 = kInf;
         TriangleIndex set_best = kInvalidIndex;
         answered = state.has_set && testSet(state, p, (p - anchor).norm(), within, set2, set_best);
         if (answered) face = set_best;
       }
-      if (!answered) storeSet(p, gatherCandidates(p, start2, reach, kCoherentSetSize, face, true), g.drift, state);
+      if (!answered) storeSet(p, gatherCandidates(p, start2, reach, kCoherentSetSize, face, true), state);
     } else {
       depthFirst(p, start2, 0, face);
     }

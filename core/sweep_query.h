@@ -190,10 +190,12 @@ class QueryStream {
   const TreeGeometry& geometry() const { return geometry_ ? *geometry_ : rest_; }
   uint32_t testLeaf(int32_t leaf, const Vec3& p, double out[8]);
   TriangleHit hitOn(TriangleIndex face, const Vec3& p) const;
+  // Squared distance from p to `face` at the current geometry's positions.
+  double squaredDistanceToFace(TriangleIndex face, const Vec3& p) const;
   double gatherCandidates(const Vec3& p, double start2, double reach, uint32_t capacity,
                           TriangleIndex& best_face, bool sorted = false);
   void orderIntoBlocks(float* block_lower, size_t blocks);
-  void storeSet(const Vec3& anchor, double set_reach, double drift, CoherentState& state) const;
+  void storeSet(const Vec3& anchor, double set_reach, CoherentState& state) const;
   bool testSet(const CoherentState& state, const Vec3& p, double moved, double within, double& best2,
                TriangleIndex& face);
   double depthFirst(const Vec3& p, double start2, double reach, TriangleIndex& best_face,
