@@ -12,6 +12,10 @@
 #include <limits>
 #include <sstream>
 
+#if defined(__AVX__)
+#include <immintrin.h>
+#endif
+
 namespace meshsweeper {
 namespace {
 
@@ -235,26 +239,23 @@ TreeGeometry Hierarchy::restGeometry() const {
   return g;
 }
 
-void fillLeafBlocks(const Hierarchy& h, const Vec3* positions, std::vector<TriangleBlock8>& blocks) {
-  const Triangle* triangles = h.mesh().triangles.data();
-  const TriangleIndex* lanes = h.leafTriangles().data();
-  blocks.resize(h.leafCount());
-  tbb::parallel_for(tbb::blocked_range<size_t>(0, blocks.size(), 256), [&](const tbb::blocked_range<size_t>& range) {
-    for (size_t leaf = range.begin(); leaf < range.end(); ++leaf)
-      gatherTriangleBlock(triangles, positions, lanes + 8 * leaf, h.leafLanes(static_cast<int32_t>(leaf)), blocks[leaf]);
-  });
-}
-
-void refitBoxes(const Hierarchy& h, const TriangleBlock8* blocks, double extent, std::vector<Node8>& nodes) {
+void refreshLeafBlocks(const Hierarchy& h, const Vec3* positions, double extent, std::vector<TriangleBlock8>& blocks,
+                       std::vector<Node8>& nodes) {
+  const Triangle* corners = h.leafCorners().data();
   const double scale = h.boxScale();
   const Vec3& center = h.center();
   const float margin = boxMargin(extent);
-  // The leaves' boxes in parallel (they read every block), then the bottom-up pass.
+  blocks.resize(h.leafCount());
+  // Each block is assembled in registers and on the stack, its box taken there, and written
+  // out with streaming stores: the blocks of a large body do not fit in the caches, and a
+  // query reads few of them, so neither reading them back for the boxes nor loading their
+  // cache lines before writing them pays.
   std::vector<std::array<float, 6>> leaf_boxes(h.leafCount());
-  tbb::parallel_for(tbb::blocked_range<size_t>(0, leaf_boxes.size(), 256), [&](const tbb::blocked_range<size_t>& range) {
+  tbb::parallel_for(tbb::blocked_range<size_t>(0, blocks.size(), 256), [&](const tbb::blocked_range<size_t>& range) {
     for (size_t leaf = range.begin(); leaf < range.end(); ++leaf) {
+      TriangleBlock8 b;
+      gatherLeafBlock(corners + 8 * leaf, positions, b);
       // Unused lanes copy a used one, so all 8 lanes of each corner count.
-      const TriangleBlock8& b = blocks[leaf];
       for (int axis = 0; axis < 3; ++axis) {
         double low = b.v[0][axis][0], high = low;
         for (int corner = 0; corner < 3; ++corner)
@@ -265,7 +266,19 @@ void refitBoxes(const Hierarchy& h, const TriangleBlock8* blocks, double extent,
         leaf_boxes[leaf][axis] = floatBelow((low - center[axis]) * scale) - margin;
         leaf_boxes[leaf][3 + axis] = floatAbove((high - center[axis]) * scale) + margin;
       }
+      double* out = &blocks[leaf].v[0][0][0];
+      const double* in = &b.v[0][0][0];
+#if defined(__AVX512F__)
+      for (int row = 0; row < 9; ++row) _mm512_stream_pd(out + 8 * row, _mm512_load_pd(in + 8 * row));
+#elif defined(__AVX__)
+      for (int half = 0; half < 18; ++half) _mm256_stream_pd(out + 4 * half, _mm256_load_pd(in + 4 * half));
+#else
+      std::copy(in, in + 72, out);
+#endif
     }
+#if defined(__AVX__)
+    _mm_sfence();  // the streamed blocks are visible before the task completes
+#endif
   });
   refitSlotBoxes(nodes, [&](int32_t leaf, float lo[3], float hi[3]) {
     for (int axis = 0; axis < 3; ++axis) {
@@ -283,6 +296,7 @@ std::string validate(const Hierarchy& h) {
   const size_t m = mesh.triangles.size();
   if (nodes.empty()) return "no root node";
   if (lanes.size() != 8 * blocks.size()) return "leaf triangle table has the wrong size";
+  if (h.leafCorners().size() != 8 * blocks.size()) return "leaf corner table has the wrong size";
 
   // Every original face in exactly one used leaf lane, with its coordinates inline.
   std::vector<uint32_t> seen(m, 0);
@@ -293,6 +307,9 @@ std::string validate(const Hierarchy& h) {
       const TriangleIndex f = lanes[8 * leaf + lane];
       if ((lane < used) != (f != kInvalidIndex))
         return "leaf " + std::to_string(leaf) + " lane " + std::to_string(lane) + " misplaced";
+      const TriangleIndex corner_face = lane < used ? f : lanes[8 * leaf];
+      if (corner_face < m && h.leafCorners()[8 * leaf + lane] != mesh.triangles[corner_face])
+        return "leaf " + std::to_string(leaf) + " lane " + std::to_string(lane) + " holds the wrong corners";
       if (f == kInvalidIndex) continue;
       if (f >= m) return "leaf " + std::to_string(leaf) + " names a face out of range";
       ++seen[f];

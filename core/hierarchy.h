@@ -98,6 +98,9 @@ class Hierarchy {
   const std::vector<TriangleBlock8>& leafBlocks() const { return leaf_blocks_; }
   // [8 * leaf + lane] original face index of a leaf lane, kInvalidIndex when unused.
   const std::vector<TriangleIndex>& leafTriangles() const { return leaf_triangles_; }
+  // [8 * leaf + lane] the corners (original vertex indices) of that lane's face, in leaf order,
+  // so that refreshing moved faces reads one table front to back; unused lanes copy lane 0.
+  const std::vector<Triangle>& leafCorners() const { return leaf_corners_; }
   uint32_t leafCount() const { return static_cast<uint32_t>(leaf_blocks_.size()); }
   // Used lanes of a leaf block (1..8); used lanes come first.
   uint32_t leafLanes(int32_t leaf) const { return leaf_lanes_[leaf]; }
@@ -130,6 +133,7 @@ class Hierarchy {
   std::vector<Node8> nodes_;
   std::vector<TriangleBlock8> leaf_blocks_;
   std::vector<TriangleIndex> leaf_triangles_;
+  std::vector<Triangle> leaf_corners_;
   std::vector<uint8_t> leaf_lanes_;
   std::vector<TriangleIndex> vertex_face_;
   Vec3 center_ = Vec3::Zero();
@@ -160,17 +164,15 @@ struct LeafVertices {
 };
 LeafVertices leafVertices(const Hierarchy& h);
 
-// Fills `blocks` (resized to h.leafCount()) with each leaf block's faces at `positions` (one
-// per mesh vertex), laid out as Hierarchy::leafBlocks(): moving geometry with inline faces.
-// Parallel over the leaves (TBB, in the caller's task arena).
-void fillLeafBlocks(const Hierarchy& h, const Vec3* positions, std::vector<TriangleBlock8>& blocks);
-
-// Rewrites every slot's box in `nodes` (over h's layout) as the box of its subtree's faces in
-// `blocks` (one per leaf, as fillLeafBlocks leaves them), rounded outward, widened by
-// boxMargin(extent); `extent` must bound the faces' largest |scaled coordinate|. The leaves'
-// boxes in parallel (TBB, in the caller's task arena), then one bottom-up pass; reads only
-// the blocks; eps and the rest of each node are kept.
-void refitBoxes(const Hierarchy& h, const TriangleBlock8* blocks, double extent, std::vector<Node8>& nodes);
+// Moving geometry with inline faces: fills `blocks` (resized to h.leafCount()) with each leaf
+// block's faces at `positions` (one per mesh vertex), laid out as Hierarchy::leafBlocks(), and
+// rewrites every slot's box in `nodes` (a copy over h's layout) as the box of its subtree's
+// faces there, rounded outward, widened by boxMargin(extent); `extent` must bound the faces'
+// largest |scaled coordinate|. eps and the rest of each node are kept. The leaves in parallel
+// (TBB, in the caller's task arena; the blocks are written with streaming stores), then one
+// bottom-up pass.
+void refreshLeafBlocks(const Hierarchy& h, const Vec3* positions, double extent, std::vector<TriangleBlock8>& blocks,
+                       std::vector<Node8>& nodes);
 
 // How far each slot's bounds can be pushed when every vertex v moves at most w[v] (w >= 0,
 // one per mesh vertex; DESIGN.md section 3), per slot [8 * node + slot]: `subtree` = the largest

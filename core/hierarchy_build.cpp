@@ -662,7 +662,10 @@ uint32_t HierarchyBuilder::addLeafBlock(const TriangleIndex* faces, size_t count
   const uint32_t leaf = static_cast<uint32_t>(h_.leaf_blocks_.size());
   gatherTriangleBlock(mesh_.triangles.data(), mesh_.positions.data(), faces, static_cast<uint32_t>(count),
                       h_.leaf_blocks_.emplace_back());
-  for (uint32_t lane = 0; lane < 8; ++lane) h_.leaf_triangles_.push_back(lane < count ? faces[lane] : kInvalidIndex);
+  for (uint32_t lane = 0; lane < 8; ++lane) {
+    h_.leaf_triangles_.push_back(lane < count ? faces[lane] : kInvalidIndex);
+    h_.leaf_corners_.push_back(mesh_.triangles[faces[lane < count ? lane : 0]]);
+  }
   h_.leaf_lanes_.push_back(static_cast<uint8_t>(count));
   return leaf;
 }
@@ -857,7 +860,7 @@ void HierarchyBuilder::run(const BuildOptions& options) {
   stats.bounds_seconds = secondsSince(bounds_start);
   stats.total_seconds = secondsSince(start);
   stats.fixed_bytes = h_.nodes_.size() * (sizeof(Node8) + 3 * sizeof(uint32_t)) +
-                      h_.leaf_blocks_.size() * (sizeof(TriangleBlock8) + 8 * sizeof(TriangleIndex) + 1) +
+                      h_.leaf_blocks_.size() * (sizeof(TriangleBlock8) + 8 * (sizeof(TriangleIndex) + sizeof(Triangle)) + 1) +
                       mesh_.positions.size() * (sizeof(Vec3) + 2 * sizeof(uint32_t)) +
                       mesh_.triangles.size() * sizeof(Triangle);
 }

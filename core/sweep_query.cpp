@@ -245,8 +245,7 @@ uint32_t QueryStream::testLeaf(int32_t leaf, const Vec3& p, double out[8]) {
   }
   // Moving geometry without inline faces: gather the lanes' corners from the positions.
   const Hierarchy& h = *hierarchy_;
-  gatherTriangleBlock(h.mesh().triangles.data(), g.positions, &h.leafTriangles()[8 * static_cast<size_t>(leaf)],
-                      used, gather_);
+  gatherLeafBlock(&h.leafCorners()[8 * static_cast<size_t>(leaf)], g.positions, gather_);
   squaredDistancesToBlock(p, gather_, out);
   return used;
 }

@@ -45,4 +45,13 @@ inline void gatherTriangleBlock(const Triangle* triangles, const Vec3* positions
   }
 }
 
+// Writes eight faces given by their corners (corners[lane], every lane set) into the block.
+inline void gatherLeafBlock(const Triangle* corners, const Vec3* positions, TriangleBlock8& block) {
+  for (uint32_t lane = 0; lane < 8; ++lane)
+    for (int k = 0; k < 3; ++k) {
+      const Vec3& x = positions[corners[lane][k]];
+      for (int axis = 0; axis < 3; ++axis) block.v[k][axis][lane] = x[axis];
+    }
+}
+
 }  // namespace meshsweeper

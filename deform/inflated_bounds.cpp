@@ -69,8 +69,7 @@ void DeformingBody::setInlineFaces(bool on) {
 // The current positions lie within the inflated boxes, so extent_bound_ bounds their extent.
 void DeformingBody::refreshInlineFaces() {
   if (!inlineFaces()) return;
-  fillLeafBlocks(*hierarchy_, positions_.data(), leaf_blocks_);
-  refitBoxes(*hierarchy_, leaf_blocks_.data(), extent_bound_, nodes_);
+  refreshLeafBlocks(*hierarchy_, positions_.data(), extent_bound_, leaf_blocks_, nodes_);
 }
 
 void DeformingBody::checkSize(size_t count, const char* what) const {

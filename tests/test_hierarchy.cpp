@@ -181,6 +181,7 @@ uint32_t checkExpansion(const Hierarchy& h) {
   REQUIRE(!nodes.empty());
   REQUIRE(lanes.size() == 8 * static_cast<size_t>(h.leafCount()));
   REQUIRE(h.leafLaneCounts().size() == h.leafCount());
+  REQUIRE(h.leafCorners().size() == lanes.size());
   std::vector<uint32_t> face_seen(m, 0), node_seen(nodes.size(), 0), leaf_seen(h.leafCount(), 0);
   Failures structure("expansion");
   uint32_t deepest = 0;
@@ -256,6 +257,8 @@ uint32_t checkExpansion(const Hierarchy& h) {
               copy = copy && block.v[corner][axis][lane] == block.v[corner][axis][0];
           structure.check(copy,
                           [&] { return "unused lane does not copy lane 0, leaf " + std::to_string(leaf); });
+          structure.check(h.leafCorners()[8 * leaf + lane] == h.leafCorners()[8 * leaf],
+                          [&] { return "unused lane's corners do not copy lane 0, leaf " + std::to_string(leaf); });
           continue;
         }
         if (f >= m) {
@@ -269,6 +272,8 @@ uint32_t checkExpansion(const Hierarchy& h) {
           for (int axis = 0; axis < 3; ++axis)
             same = same && block.v[corner][axis][lane] == mesh.positions[mesh.triangles[f][corner]][axis];
         structure.check(same, [&] { return "leaf block coordinates differ from face " + std::to_string(f); });
+        structure.check(h.leafCorners()[8 * leaf + lane] == mesh.triangles[f],
+                        [&] { return "leaf corners differ from face " + std::to_string(f); });
       }
     }
   }
