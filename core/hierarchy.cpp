@@ -12,9 +12,6 @@
 #include <limits>
 #include <sstream>
 
-#if defined(__AVX__)
-#include <immintrin.h>
-#endif
 
 namespace meshsweeper {
 namespace {
@@ -246,10 +243,9 @@ void refreshLeafBlocks(const Hierarchy& h, const Vec3* positions, double extent,
   const Vec3& center = h.center();
   const float margin = boxMargin(extent);
   blocks.resize(h.leafCount());
-  // Each block is assembled in registers and on the stack, its box taken there, and written
-  // out with streaming stores: the blocks of a large body do not fit in the caches, and a
-  // query reads few of them, so neither reading them back for the boxes nor loading their
-  // cache lines before writing them pays.
+  // Each block is assembled on the stack and its box taken there (not read back afterwards:
+  // a large body's blocks do not stay in the caches). Streaming stores were measured too:
+  // no faster on large bodies, slower queries on small ones (their blocks left the caches).
   std::vector<std::array<float, 6>> leaf_boxes(h.leafCount());
   tbb::parallel_for(tbb::blocked_range<size_t>(0, blocks.size(), 256), [&](const tbb::blocked_range<size_t>& range) {
     for (size_t leaf = range.begin(); leaf < range.end(); ++leaf) {
@@ -266,19 +262,8 @@ void refreshLeafBlocks(const Hierarchy& h, const Vec3* positions, double extent,
         leaf_boxes[leaf][axis] = floatBelow((low - center[axis]) * scale) - margin;
         leaf_boxes[leaf][3 + axis] = floatAbove((high - center[axis]) * scale) + margin;
       }
-      double* out = &blocks[leaf].v[0][0][0];
-      const double* in = &b.v[0][0][0];
-#if defined(__AVX512F__)
-      for (int row = 0; row < 9; ++row) _mm512_stream_pd(out + 8 * row, _mm512_load_pd(in + 8 * row));
-#elif defined(__AVX__)
-      for (int half = 0; half < 18; ++half) _mm256_stream_pd(out + 4 * half, _mm256_load_pd(in + 4 * half));
-#else
-      std::copy(in, in + 72, out);
-#endif
+      blocks[leaf] = b;
     }
-#if defined(__AVX__)
-    _mm_sfence();  // the streamed blocks are visible before the task completes
-#endif
   });
   refitSlotBoxes(nodes, [&](int32_t leaf, float lo[3], float hi[3]) {
     for (int axis = 0; axis < 3; ++axis) {

@@ -169,8 +169,7 @@ LeafVertices leafVertices(const Hierarchy& h);
 // rewrites every slot's box in `nodes` (a copy over h's layout) as the box of its subtree's
 // faces there, rounded outward, widened by boxMargin(extent); `extent` must bound the faces'
 // largest |scaled coordinate|. eps and the rest of each node are kept. The leaves in parallel
-// (TBB, in the caller's task arena; the blocks are written with streaming stores), then one
-// bottom-up pass.
+// (TBB, in the caller's task arena), then one bottom-up pass.
 void refreshLeafBlocks(const Hierarchy& h, const Vec3* positions, double extent, std::vector<TriangleBlock8>& blocks,
                        std::vector<Node8>& nodes);
 
