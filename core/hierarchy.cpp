@@ -12,7 +12,6 @@
 #include <limits>
 #include <sstream>
 
-
 namespace meshsweeper {
 namespace {
 
@@ -71,10 +70,11 @@ void refitSlotBoxes(std::vector<Node8>& nodes, LeafBox&& leaf_box) {
 
 void refitBounds(const Hierarchy& h, const Vec3* positions, std::vector<Node8>& nodes, bool radii, bool boxes) {
   const Mesh& mesh = h.mesh();
-  const auto& lanes = h.leafTriangles();
+  const Triangle* corners = h.leafCorners().data();
   const double scale = h.boxScale();
   const float inf = std::numeric_limits<float>::infinity();
-  // Leaf slots from their faces' vertices (refitSlotBoxes does the inner slots).
+  // Leaf slots from their faces' vertices (refitSlotBoxes does the inner slots); unused lanes
+  // copy lane 0's corners, so all eight count.
   double extent = 0;
   for (size_t v = 0; boxes && v < mesh.positions.size(); ++v)
     extent = std::max(extent, ((positions[v] - h.center()) * scale).cwiseAbs().maxCoeff());
@@ -82,8 +82,8 @@ void refitBounds(const Hierarchy& h, const Vec3* positions, std::vector<Node8>& 
   if (boxes) {
     refitSlotBoxes(nodes, [&](int32_t leaf, float lo[3], float hi[3]) {
       Vec3 low = Vec3::Constant(std::numeric_limits<double>::infinity()), high = -low;
-      for (uint32_t lane = 0; lane < h.leafLanes(leaf); ++lane) {
-        for (VertexIndex v : mesh.triangles[lanes[8 * leaf + lane]]) {
+      for (uint32_t lane = 0; lane < 8; ++lane) {
+        for (VertexIndex v : corners[8 * static_cast<size_t>(leaf) + lane]) {
           low = low.cwiseMin(positions[v]);
           high = high.cwiseMax(positions[v]);
         }
@@ -126,7 +126,7 @@ void refitBounds(const Hierarchy& h, const Vec3* positions, std::vector<Node8>& 
         double worst = 0;  // squared
         auto evaluateLeaf = [&](int32_t leaf) {
           for (uint32_t lane = 0; lane < h.leafLanes(leaf); ++lane) {
-            for (VertexIndex v : mesh.triangles[lanes[8 * leaf + lane]]) {
+            for (VertexIndex v : corners[8 * static_cast<size_t>(leaf) + lane]) {
               if (stamp[v] == clock) continue;
               stamp[v] = clock;
               worst = std::max(worst, squaredDistanceToTriangle(positions[v], a, b, c));
@@ -244,8 +244,7 @@ void refreshLeafBlocks(const Hierarchy& h, const Vec3* positions, double extent,
   const float margin = boxMargin(extent);
   blocks.resize(h.leafCount());
   // Each block is assembled on the stack and its box taken there (not read back afterwards:
-  // a large body's blocks do not stay in the caches). Streaming stores were measured too:
-  // no faster on large bodies, slower queries on small ones (their blocks left the caches).
+  // a large body's blocks do not stay in the caches).
   std::vector<std::array<float, 6>> leaf_boxes(h.leafCount());
   tbb::parallel_for(tbb::blocked_range<size_t>(0, blocks.size(), 256), [&](const tbb::blocked_range<size_t>& range) {
     for (size_t leaf = range.begin(); leaf < range.end(); ++leaf) {

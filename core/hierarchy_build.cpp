@@ -660,12 +660,11 @@ void HierarchyBuilder::splitFaces(FaceItem* first, FaceItem* last, size_t group,
 
 uint32_t HierarchyBuilder::addLeafBlock(const TriangleIndex* faces, size_t count) {
   const uint32_t leaf = static_cast<uint32_t>(h_.leaf_blocks_.size());
-  gatherTriangleBlock(mesh_.triangles.data(), mesh_.positions.data(), faces, static_cast<uint32_t>(count),
-                      h_.leaf_blocks_.emplace_back());
   for (uint32_t lane = 0; lane < 8; ++lane) {
     h_.leaf_triangles_.push_back(lane < count ? faces[lane] : kInvalidIndex);
     h_.leaf_corners_.push_back(mesh_.triangles[faces[lane < count ? lane : 0]]);
   }
+  gatherLeafBlock(&h_.leaf_corners_[8 * static_cast<size_t>(leaf)], mesh_.positions.data(), h_.leaf_blocks_.emplace_back());
   h_.leaf_lanes_.push_back(static_cast<uint8_t>(count));
   return leaf;
 }

@@ -32,26 +32,24 @@ struct alignas(64) TriangleBlock8 {
 // squaredDistanceToTriangle for that lane's triangle up to rounding (relative 1e-14).
 void squaredDistancesToBlock(const Vec3& p, const TriangleBlock8& block, double out[8]);
 
+// Writes the triangle with corners t (indices into `positions`) into lane `lane` of the block.
+inline void setBlockLane(TriangleBlock8& block, uint32_t lane, const Vec3* positions, const Triangle& t) {
+  for (int k = 0; k < 3; ++k) {
+    const Vec3& x = positions[t[k]];
+    for (int axis = 0; axis < 3; ++axis) block.v[k][axis][lane] = x[axis];
+  }
+}
+
 // Writes the faces faces[0, used) (indices into `triangles`, corners at `positions`) into the
 // block's lanes; the lanes past `used` copy lane 0 (1 <= used <= 8).
 inline void gatherTriangleBlock(const Triangle* triangles, const Vec3* positions, const TriangleIndex* faces,
                                 uint32_t used, TriangleBlock8& block) {
-  for (uint32_t lane = 0; lane < 8; ++lane) {
-    const Triangle& t = triangles[faces[lane < used ? lane : 0]];
-    for (int k = 0; k < 3; ++k) {
-      const Vec3& x = positions[t[k]];
-      for (int axis = 0; axis < 3; ++axis) block.v[k][axis][lane] = x[axis];
-    }
-  }
+  for (uint32_t lane = 0; lane < 8; ++lane) setBlockLane(block, lane, positions, triangles[faces[lane < used ? lane : 0]]);
 }
 
 // Writes eight faces given by their corners (corners[lane], every lane set) into the block.
 inline void gatherLeafBlock(const Triangle* corners, const Vec3* positions, TriangleBlock8& block) {
-  for (uint32_t lane = 0; lane < 8; ++lane)
-    for (int k = 0; k < 3; ++k) {
-      const Vec3& x = positions[corners[lane][k]];
-      for (int axis = 0; axis < 3; ++axis) block.v[k][axis][lane] = x[axis];
-    }
+  for (uint32_t lane = 0; lane < 8; ++lane) setBlockLane(block, lane, positions, corners[lane]);
 }
 
 }  // namespace meshsweeper
