@@ -190,10 +190,6 @@ struct DistanceService::Impl {
   // A deforming body's new positions (checked by DeformingBody::setPositions: a wrong count or
   // a non-finite coordinate throws, the body unchanged), re-anchored past its bound.
   PositionsUpdate applyPositions(Body& b, const std::vector<Vec3>& positions) {
-    // Inline faces when the last step's queries tested enough leaf blocks to pay for refreshing
-    // them all (kInlineFacesOn, kInlineFacesOff).
-    const double per_leaf = static_cast<double>(b.leaves_tested) / b.deforming->hierarchy()->leafCount();
-    b.deforming->setInlineFaces(per_leaf >= (b.deforming->inlineFaces() ? kInlineFacesOff : kInlineFacesOn));
     const DisplacementCheck check = b.deforming->setPositions(positions);
     PositionsUpdate update;
     if (!check.accepted) {
@@ -203,8 +199,31 @@ struct DistanceService::Impl {
       update.worst_vertex = check.worst_vertex;
       update.excess = check.excess;
     }
+    // Inline faces when the last step's queries tested enough leaf blocks to pay for refreshing
+    // them all (kInlineFacesOn, kInlineFacesOff). Decided once the positions are accepted, so
+    // positions that throw leave the body as it was; turning them on fills them at the new
+    // positions.
+    const double per_leaf = static_cast<double>(b.leaves_tested) / b.deforming->hierarchy()->leafCount();
+    b.deforming->setInlineFaces(per_leaf >= (b.deforming->inlineFaces() ? kInlineFacesOff : kInlineFacesOn));
     b.box_dirty = true;
     return update;
+  }
+
+  // Drops every pair state of body `slot` (it was removed).
+  void dropStates(uint32_t slot) {
+    for (BlockStates& b : blocks) {
+      uint32_t kept = 0;
+      for (uint32_t j = 0; j < b.points; ++j) {
+        const uint32_t first = b.begin[j], last = b.begin[j + 1];
+        b.begin[j] = kept;
+        for (uint32_t k = first; k < last; ++k)
+          if (b.pairs[k].slot != slot) b.pairs[kept++] = b.pairs[k];
+      }
+      if (b.points > 0) b.begin[b.points] = kept;
+      if (kept == b.pairs.size()) continue;
+      b.pairs.resize(kept);
+      b.pairs.shrink_to_fit();  // removing a body is rare: give its memory back at once
+    }
   }
 
   BodyHandle add(Body&& b) {
@@ -340,8 +359,8 @@ struct DistanceService::Impl {
     s.candidate_count.resize(count);
     for (uint32_t j = 0; j < count; ++j) {
       const Vec3 p = points.row(first + j).transpose();
-      if (!p.allFinite()) {
-        out.status_[first + j] = PointStatus::kNotFinite;
+      if (!inCoordinateRange(p)) {
+        out.status_[first + j] = p.allFinite() ? PointStatus::kOutOfRange : PointStatus::kNotFinite;
         s.candidate_count[j] = 0;
         ++stats.invalid_points;
         continue;
@@ -450,6 +469,22 @@ struct DistanceService::Impl {
     stats.states = states.pairs.size();
   }
 
+  // The hits [first, last) of one point on one body: on a closed body they all take the sign
+  // of the closest (the lowest triangle at equal distance), where the pseudonormal test holds;
+  // a farther face's own feature says nothing about inside and outside.
+  static void signLikeClosest(DistanceHit* first, DistanceHit* last) {
+    if (first == last || !first->closed_body) return;
+    const DistanceHit* closest = first;
+    for (const DistanceHit* h = first + 1; h != last; ++h)
+      if (h->distance < closest->distance || (h->distance == closest->distance && h->triangle < closest->triangle))
+        closest = h;
+    const HitSign sign = closest->sign;
+    for (DistanceHit* h = first; h != last; ++h) {
+      h->sign = sign;
+      h->signed_distance = sign == HitSign::kInside ? -h->distance : h->distance;
+    }
+  }
+
   void withinBlock(size_t block, const PointsRef& points, double d, StepResult& out) {
     Scratch& s = scratch.local();
     const size_t bs = options.block_size;
@@ -472,8 +507,10 @@ struct DistanceService::Impl {
         qs.within(q, d, s.triangle_hits);
         stats.triangles_tested += qs.counters().triangles_tested;
         s.streams[slot].leaves_tested += qs.counters().leaves_tested;
+        const size_t from = s.point_hits.size();
         for (const TriangleHit& t : s.triangle_hits)
           s.point_hits.push_back(makeHit(slot, q, t.triangle, t.feature, t.point, t.barycentric, t.distance));
+        signLikeClosest(s.point_hits.data() + from, s.point_hits.data() + s.point_hits.size());
       }
       std::sort(s.point_hits.begin(), s.point_hits.end(), hitOrder);
       out.begin_[i] = hits.size();  // block-local; offset added when the blocks are joined
@@ -502,8 +539,11 @@ std::shared_ptr<const Hierarchy> DistanceService::hierarchyFor(const Mesh& mesh)
   auto it = impl_->mesh_cache.find(&mesh);
   if (it != impl_->mesh_cache.end()) {
     const MeshCacheEntry& e = it->second;
+    // The same address can hold another mesh (a new one in the same storage): the contents
+    // decide (the hierarchy keeps a copy; comparing costs far less than a build).
     if (e.positions == mesh.positions.data() && e.triangles == mesh.triangles.data() &&
-        e.vertex_count == mesh.positions.size() && e.triangle_count == mesh.triangles.size())
+        e.vertex_count == mesh.positions.size() && e.triangle_count == mesh.triangles.size() &&
+        e.hierarchy->mesh().positions == mesh.positions && e.hierarchy->mesh().triangles == mesh.triangles)
       return e.hierarchy;
   }
   MeshCacheEntry e;
@@ -578,6 +618,7 @@ void DistanceService::remove(BodyHandle handle) {
   --impl_->live;
   for (Scratch& s : impl_->scratch)
     if (handle.index < s.streams.size()) s.streams[handle.index] = StreamSlot{};
+  impl_->dropStates(handle.index);
 }
 
 bool DistanceService::contains(BodyHandle h) const {
@@ -656,15 +697,15 @@ std::vector<PositionsUpdate> DistanceService::setPositions(const std::vector<Bod
                                 " appears twice in the batch");
   std::vector<PositionsUpdate> updates(batch.size());
   impl_->arena->execute([&] {
-    // Non-finite coordinates first (read-only), so an error leaves every body unchanged.
+    // Coordinates first (read-only), so an error leaves every body unchanged.
     std::vector<uint8_t> finite(batch.size(), 1);
     tbb::parallel_for(size_t{0}, batch.size(), [&](size_t i) {
       bool ok = true;
-      for (const Vec3& x : *batch[i].positions) ok &= x.allFinite();
+      for (const Vec3& x : *batch[i].positions) ok &= inCoordinateRange(x);
       finite[i] = ok;
     });
     for (size_t i = 0; i < batch.size(); ++i)
-      if (!finite[i]) throw error(i, " has a non-finite position");
+      if (!finite[i]) throw error(i, " has a non-finite position or one beyond 1e150 in magnitude");
     tbb::parallel_for(size_t{0}, batch.size(),
                       [&](size_t i) { updates[i] = impl_->applyPositions(*targets[i], *batch[i].positions); });
   });

@@ -72,7 +72,9 @@ enum class HitSign : int8_t { kInside = -1, kUnsigned = 0, kOutside = 1 };
 
 enum class PointStatus : uint8_t {
   kOk = 0,
-  kNotFinite = 1,  // the point has a NaN or infinite coordinate: no hits, its states dropped
+  kNotFinite = 1,   // the point has a NaN or infinite coordinate: no hits, its states dropped
+  kOutOfRange = 2,  // a coordinate beyond kMaxCoordinate (1e150, core/types.h), where squared
+                    // distances would overflow: no hits, its states dropped
 };
 
 // One answer: a triangle of a body and the closest point on it. All vectors in world space.
@@ -95,7 +97,7 @@ struct DistanceHit {
 // Work done by one step (summed over points; identical for any thread count).
 struct StepStats {
   uint64_t points = 0;            // points in the batch
-  uint64_t invalid_points = 0;    // points with status kNotFinite
+  uint64_t invalid_points = 0;    // points with status kNotFinite or kOutOfRange
   uint64_t pairs = 0;             // (point, body) pairs the broadphase passed to a body
   uint64_t warm_pairs = 0;        // closest mode: pairs that had a state from the last step
   uint64_t certified_pairs = 0;   // closest mode: pairs answered from the cached candidate set
@@ -195,10 +197,10 @@ class DistanceService {
 
   // ---- Shared tables ---------------------------------------------------------------------
   // The hierarchy of `mesh`, built on first use and cached by the mesh's address: later calls
-  // with the same Mesh object return the same shared hierarchy. The cache trusts the caller:
-  // a cached mesh must not be changed in place (a change of vertex or triangle count, or of
-  // the vectors' storage, is detected and rebuilds). forgetMesh() drops an entry. Throws
-  // MeshError for an invalid mesh.
+  // with the same, unchanged Mesh object return the same shared hierarchy. Each call compares
+  // the mesh with the hierarchy's copy (one pass over it, far cheaper than a build), so a mesh
+  // changed in place, or another mesh at the same address, gets a new hierarchy. forgetMesh()
+  // drops an entry. Throws MeshError for an invalid mesh.
   std::shared_ptr<const Hierarchy> hierarchyFor(const Mesh& mesh);
   void forgetMesh(const Mesh& mesh);
   // The shared per-mesh tables the service uses for `hierarchy` (built once per hierarchy and
@@ -265,8 +267,8 @@ class DistanceService {
   // ---- Queries ---------------------------------------------------------------------------
   // Answers every point (one row each) against every body within `max_distance` (>= 0;
   // +infinity allowed): kClosest keeps the closest hit over all bodies, kWithin every triangle
-  // within the distance. Points with a NaN or infinite coordinate get PointStatus::kNotFinite and
-  // no hits (the step goes on). Throws std::invalid_argument if max_distance is NaN or negative.
+  // within the distance. Points with a NaN or infinite coordinate get PointStatus::kNotFinite,
+  // finite ones beyond 1e150 kOutOfRange, and no hits (the step goes on). Throws std::invalid_argument if max_distance is NaN or negative.
   // Results are written into `out` (its memory reused).
   void step(PointsRef points, double max_distance, QueryMode mode, StepResult& out);
   StepResult step(PointsRef points, double max_distance, QueryMode mode = QueryMode::kClosest);

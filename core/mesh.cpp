@@ -15,6 +15,8 @@ std::string checkMesh(const Mesh& mesh) {
   for (size_t v = 0; v < mesh.positions.size(); ++v) {
     if (!mesh.positions[v].allFinite())
       return name + ": vertex " + std::to_string(v) + " has a non-finite coordinate";
+    if (!inCoordinateRange(mesh.positions[v]))
+      return name + ": vertex " + std::to_string(v) + " has a coordinate beyond 1e150 in magnitude (distances would overflow)";
   }
   const size_t n = mesh.positions.size();
   for (size_t t = 0; t < mesh.triangles.size(); ++t) {

@@ -23,7 +23,8 @@ class MeshError : public std::runtime_error {
   using std::runtime_error::runtime_error;
 };
 
-// Checks what every builder needs: at least one triangle, finite coordinates, indices in range.
+// Checks what every builder needs: at least one triangle, finite coordinates within
+// kMaxCoordinate, indices in range.
 // Returns an empty string when the mesh is usable, else "NAME: problem".
 std::string checkMesh(const Mesh& mesh);
 

@@ -181,6 +181,14 @@ double slotBound(const Node8& node, int k, const Vec3* positions, const Vec3& p,
   return std::max(boxLowerBound(box_d2, inv_scale), to_triangle * (1 - 1e-12) - node.eps[k]);
 }
 
+// The answer to a point that cannot be queried (beyond kMaxQueryCoordinate, or NaN): NaN, no
+// triangle.
+ClosestPoint unanswerable() {
+  ClosestPoint out;
+  out.distance = out.lower = out.upper = std::numeric_limits<double>::quiet_NaN();
+  return out;
+}
+
 }  // namespace
 
 QueryStream::QueryStream(std::shared_ptr<const Hierarchy> hierarchy, CoherenceOptions options)
@@ -309,9 +317,12 @@ double QueryStream::depthFirst(const Vec3& p, double start2, double reach, Trian
       const int32_t leaf = leafIndex(entry.ref);
       const uint32_t used = testLeaf(leaf, p, exact);
       for (uint32_t lane = 0; lane < used; ++lane) {
-        if (exact[lane] < best2) {
+        // Ties go to the lowest face index, as in testSet: the answer does not depend on the
+        // order of the search, the warm start or a cached set.
+        const TriangleIndex f = lanes[8 * leaf + lane];
+        if (exact[lane] < best2 || (exact[lane] == best2 && f < best_face)) {
           best2 = exact[lane];
-          best_face = lanes[8 * leaf + lane];
+          best_face = f;
         }
       }
       if (reach > 0) {
@@ -463,20 +474,24 @@ void QueryStream::orderIntoBlocks(float* block_lower, size_t blocks) {
 
 ClosestPoint QueryStream::closest(const Vec3& p) {
   counters_ = {};
+  if (!inCoordinateRange(p, kMaxQueryCoordinate)) return unanswerable();
   TriangleIndex face = kInvalidIndex;
   depthFirst(p, kInf, 0, face);
   ClosestPoint out;
-  if (face == kInvalidIndex) {  // only for a non-finite query point
-    out.distance = out.lower = out.upper = std::numeric_limits<double>::quiet_NaN();
-  } else {
-    fillFromHit(out, hitOn(face, p));
-  }
+  fillFromHit(out, hitOn(face, p));  // a point in range always finds a face
   out.counters = counters_;
   return out;
 }
 
 ClosestPoint QueryStream::closestCoherent(const Vec3& p) {
   const TreeGeometry& g = geometry();
+  if (!inCoordinateRange(p, kMaxQueryCoordinate)) {
+    counters_ = {};
+    ++coherence_.steps;
+    has_last_ = false;
+    has_set_ = false;
+    return unanswerable();
+  }
   counters_ = {};
   ++coherence_.steps;
   if (has_last_) {
@@ -599,15 +614,13 @@ ClosestPoint QueryStream::closestCoherent(const Vec3& p, CoherentState& state, b
   const TreeGeometry& g = geometry();
   const Mesh& mesh = hierarchy_->mesh();
   counters_ = {};
-  if (!p.allFinite()) {
+  if (!inCoordinateRange(p, kMaxQueryCoordinate)) {
     if (certified_out) *certified_out = false;
     const float reach_steps = state.reach_steps, lead_steps = state.lead_steps;
     state = CoherentState{};
     state.reach_steps = reach_steps;
     state.lead_steps = lead_steps;
-    ClosestPoint out;
-    out.distance = out.lower = out.upper = std::numeric_limits<double>::quiet_NaN();
-    return out;
+    return unanswerable();
   }
   // Within a lineage faces move by at most the change of the geometry's drift: the previous
   // face warm-starts the search and the set's certificate shrinks by that much.
@@ -708,6 +721,7 @@ ClosestPoint QueryStream::closestWithin(const Vec3& p, double tolerance) {
   const Hierarchy& h = *hierarchy_;
   const TreeGeometry& g = geometry();
   counters_ = {};
+  if (!inCoordinateRange(p, kMaxQueryCoordinate)) return unanswerable();
   const ScaledPoint sp = scalePoint(g, p);
   const double inv_scale = 1.0 / g.box_scale;
   const TriangleIndex* lanes = h.leafTriangles().data();
@@ -769,7 +783,7 @@ void QueryStream::kClosest(const Vec3& p, size_t k, std::vector<TriangleHit>& ou
   const TreeGeometry& g = geometry();
   out.clear();
   counters_ = {};
-  if (k == 0) return;
+  if (k == 0 || !inCoordinateRange(p, kMaxQueryCoordinate)) return;
   const ScaledPoint sp = scalePoint(g, p);
   const double inv_scale = 1.0 / g.box_scale;
   const TriangleIndex* lanes = h.leafTriangles().data();
@@ -824,7 +838,7 @@ void QueryStream::within(const Vec3& p, double d, std::vector<TriangleHit>& out)
   const TreeGeometry& g = geometry();
   out.clear();
   counters_ = {};
-  if (!(d >= 0)) return;
+  if (!(d >= 0) || !inCoordinateRange(p, kMaxQueryCoordinate)) return;
   const ScaledPoint sp = scalePoint(g, p);
   const float threshold = pruneThreshold(d * d, g.box_scale * g.box_scale);
   const TriangleIndex* lanes = h.leafTriangles().data();
@@ -997,6 +1011,10 @@ ClosestPoint QueryStream::closestWithinCoherent(const Vec3& p, double tolerance)
   const TreeGeometry& g = geometry();
   counters_ = {};
   ++coherence_.steps;
+  if (!inCoordinateRange(p, kMaxQueryCoordinate)) {
+    has_front_ = false;  // the front restarts at the next point
+    return unanswerable();
+  }
   const ScaledPoint sp = scalePoint(g, p);
   frontMove(p);
   double upper = kInf;
@@ -1016,7 +1034,8 @@ void QueryStream::kClosestCoherent(const Vec3& p, size_t k, std::vector<Triangle
   out.clear();
   counters_ = {};
   ++coherence_.steps;
-  if (k == 0) return;
+  if (!inCoordinateRange(p, kMaxQueryCoordinate)) has_front_ = false;  // the front restarts at the next point
+  if (k == 0 || !inCoordinateRange(p, kMaxQueryCoordinate)) return;
   const ScaledPoint sp = scalePoint(g, p);
   frontMove(p);
   double upper = kInf;

@@ -113,6 +113,12 @@ class QueryStream {
   // changes, coherent state is rebuilt.
   void setGeometry(const TreeGeometry* geometry);
 
+  // Every query takes a point with finite coordinates within kMaxQueryCoordinate (core/types.h);
+  // any other point is answered, never searched: NaN distance and bounds, triangle
+  // kInvalidIndex (closest*), no faces (kClosest*, within), and coherent state restarts.
+  // closest() and closestCoherent() give ties at equal distance to the lowest triangle index,
+  // so their answers never depend on the search order, the warm start or a cached set.
+
   // Exact closest point: depth-first, closest child first, pruning with the best distance.
   ClosestPoint closest(const Vec3& p);
 

@@ -4,6 +4,7 @@
 #include <Eigen/Geometry>
 
 #include <array>
+#include <cmath>
 #include <cstdint>
 
 namespace meshsweeper {
@@ -14,6 +15,18 @@ using TriangleIndex = uint32_t;  // index into Mesh::triangles (file order, afte
 using Triangle = std::array<VertexIndex, 3>;
 
 inline constexpr uint32_t kInvalidIndex = 0xffffffffu;
+
+// The largest coordinate magnitude accepted for meshes, moved vertices, rigid translations and
+// the service's query points. A query (core/sweep_query.h) takes points up to
+// kMaxQueryCoordinate, which leaves room for a rigid body's frame: a squared distance between
+// such a point and a mesh vertex (at most 3 x 1.001e153 squared) stays below the largest
+// double, so no distance overflows.
+inline constexpr double kMaxCoordinate = 1e150;
+inline constexpr double kMaxQueryCoordinate = 1e153;
+// Finite and within `limit` on every axis (false for NaN).
+inline bool inCoordinateRange(const Vec3& x, double limit = kMaxCoordinate) {
+  return std::abs(x.x()) <= limit && std::abs(x.y()) <= limit && std::abs(x.z()) <= limit;
+}
 
 // A float no smaller than x >= 0, without a branch: x is raised by more than rounding to float
 // can take off (2^-24 relative for normal floats, 2^-150 absolute below them).

@@ -81,8 +81,9 @@ void DeformingBody::checkSize(size_t count, const char* what) const {
 void DeformingBody::anchor(const std::vector<Vec3>& positions) {
   checkSize(positions.size(), "anchor positions");
   for (size_t v = 0; v < positions.size(); ++v)
-    if (!positions[v].allFinite())
-      throw std::invalid_argument("DeformingBody: anchor position " + std::to_string(v) + " is not finite");
+    if (!inCoordinateRange(positions[v]))
+      throw std::invalid_argument("DeformingBody: anchor position " + std::to_string(v) +
+                                  " is not finite or beyond 1e150 in magnitude");
   anchor_positions_ = positions;
   positions_ = positions;
   anchor_nodes_ = hierarchy_->nodes();
@@ -163,23 +164,24 @@ void DeformingBody::inflate(const std::vector<double>& delta) {
 DisplacementCheck DeformingBody::setPositions(const std::vector<Vec3>& positions) {
   checkSize(positions.size(), "positions");
   DisplacementCheck check;
-  // A branch-free pass (the compiler vectorises it): non-finite positions, vertices that may be
-  // past their bound (a superset: squared, with a relative 1e-12 to spare), and how far the
-  // farthest vertex moves (the lineage's drift grows by that). NaN fails every comparison, so
-  // it is caught by `finite`.
+  // A branch-free pass (the compiler vectorises it): positions not finite or beyond
+  // kMaxCoordinate, vertices that may be past their bound (a superset: squared, with a relative
+  // 1e-12 to spare), and how far the farthest vertex moves (the lineage's drift grows by that).
+  // NaN fails every comparison, so it is caught by `finite`.
   bool finite = true, suspect = false;
   double moved2 = 0;
   for (size_t v = 0; v < positions.size(); ++v) {
     const Vec3 d = positions[v] - anchor_positions_[v];
     const double d2 = d.squaredNorm();
-    finite &= d2 <= std::numeric_limits<double>::max();
+    finite &= inCoordinateRange(positions[v]);
     suspect |= d2 > delta_[v] * delta_[v] * (1 - 1e-12);
     moved2 = std::max(moved2, (positions[v] - positions_[v]).squaredNorm());
   }
   if (!finite || suspect) {
     for (size_t v = 0; v < positions.size(); ++v) {
-      if (!positions[v].allFinite())
-        throw std::invalid_argument("DeformingBody: position " + std::to_string(v) + " is not finite");
+      if (!inCoordinateRange(positions[v]))
+        throw std::invalid_argument("DeformingBody: position " + std::to_string(v) +
+                                    " is not finite or beyond 1e150 in magnitude");
       const double excess = (positions[v] - anchor_positions_[v]).norm() - delta_[v];
       if (excess > 0 && excess > check.excess) {
         check.accepted = false;

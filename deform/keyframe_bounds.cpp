@@ -34,9 +34,9 @@ KeyframeBody::KeyframeBody(std::shared_ptr<const Hierarchy> hierarchy,
                                   std::to_string(frames_[f].size()) + " positions, the mesh has " +
                                   std::to_string(n));
     for (size_t v = 0; v < n; ++v)
-      if (!frames_[f][v].allFinite())
+      if (!inCoordinateRange(frames_[f][v]))
         throw std::invalid_argument("KeyframeBody: frame " + std::to_string(f) + " vertex " +
-                                    std::to_string(v) + " is not finite");
+                                    std::to_string(v) + " is not finite or beyond 1e150 in magnitude");
   }
   double extent = 0;
   for (const auto& frame : frames_) {

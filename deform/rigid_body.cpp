@@ -14,6 +14,8 @@ void RigidBody::setPose(const Eigen::Isometry3d& pose) {
   const Eigen::Matrix3d r = pose.linear();
   if (!pose.matrix().allFinite())
     throw std::invalid_argument("RigidBody: the pose has a non-finite entry");
+  if (!inCoordinateRange(pose.translation()))
+    throw std::invalid_argument("RigidBody: the pose's translation is beyond 1e150 in magnitude");
   if (!(r.transpose() * r).isIdentity(1e-9) || std::abs(r.determinant() - 1) > 1e-9)
     throw std::invalid_argument("RigidBody: the pose's rotation is not orthonormal (a rigid pose has no scale or shear)");
   pose_ = pose;

@@ -598,13 +598,15 @@ TEST_CASE("rigid bodies: non-rigid poses throw", "[deform][rigid]") {
   nan_translation.translation().x() = std::numeric_limits<double>::quiet_NaN();
   Eigen::Isometry3d inf_rotation = Eigen::Isometry3d::Identity();
   inf_rotation.linear()(1, 1) = std::numeric_limits<double>::infinity();
+  Eigen::Isometry3d huge_translation = Eigen::Isometry3d::Identity();
+  huge_translation.translation() = Vec3(0, 3e150, 0);
   Eigen::Isometry3d good = Eigen::Isometry3d::Identity();
   good.linear() = Eigen::AngleAxisd(0.7, Vec3(1, 2, 3).normalized()).toRotationMatrix();
   good.translation() = Vec3(1, -2, 3);
   RigidBody body(h, good);
   for (const auto& [name, pose] : std::vector<std::pair<const char*, Eigen::Isometry3d>>{
            {"scale 1.01", scaled}, {"shear", shear}, {"mirror", mirror}, {"NaN translation", nan_translation},
-           {"infinite rotation entry", inf_rotation}}) {
+           {"infinite rotation entry", inf_rotation}, {"translation beyond 1e150", huge_translation}}) {
     INFO("pose: " << name);
     CHECK_THROWS_AS(RigidBody(h, pose), std::invalid_argument);
     CHECK_THROWS_AS(body.setPose(pose), std::invalid_argument);
@@ -656,6 +658,9 @@ TEST_CASE("key frames: bad frames throw", "[deform][keyframe]") {
   CHECK_THROWS_AS(KeyframeBody(h, Frames{long_frame}), std::invalid_argument);
   CHECK_THROWS_AS((KeyframeBody(h, Frames{mesh.positions, nan_frame, mesh.positions})), std::invalid_argument);
   CHECK_THROWS_AS(KeyframeBody(h, Frames{inf_frame}), std::invalid_argument);
+  std::vector<Vec3> huge_frame = mesh.positions;
+  huge_frame[1].x() = 1e151;
+  CHECK_THROWS_WITH(KeyframeBody(h, Frames{mesh.positions, huge_frame}), Catch::Contains("beyond 1e150"));
   CHECK_NOTHROW((KeyframeBody(h, Frames{mesh.positions, mesh.positions})));
 }
 
@@ -699,6 +704,10 @@ TEST_CASE("inflated bounds: bad input throws and changes nothing", "[deform][inf
   std::vector<Vec3> inf_positions = moved;
   inf_positions[2].z() = inf;
   CHECK_THROWS_AS(body.setPositions(inf_positions), std::invalid_argument);
+  std::vector<Vec3> huge_positions = moved;
+  huge_positions[2].y() = -1e155;  // finite, but squared distances would overflow
+  CHECK_THROWS_WITH(body.setPositions(huge_positions), Catch::Contains("position 2") && Catch::Contains("beyond 1e150"));
+  CHECK_THROWS_WITH(body.anchor(huge_positions), Catch::Contains("beyond 1e150"));
   CHECK_THROWS_AS(body.anchor(std::vector<Vec3>(n + 1, Vec3::Zero())), std::invalid_argument);
   CHECK_THROWS_AS(body.anchor(nan_positions), std::invalid_argument);
   // Nothing changed: the accepted positions, valid bounds, exact queries.

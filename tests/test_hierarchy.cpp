@@ -586,6 +586,15 @@ TEST_CASE("hierarchy: bad input throws MeshError with a useful message", "[hiera
     CHECK_THROWS_WITH(Hierarchy::build(mesh), Catch::Contains("nan-sphere") && Catch::Contains("vertex 7") &&
                                                   Catch::Contains("non-finite"));
   }
+  SECTION("vertex beyond 1e150 (distances would overflow)") {
+    Mesh mesh = scenes::icosphere(1);
+    mesh.name = "huge-sphere";
+    mesh.positions[5].x() = 2e150;
+    CHECK_THROWS_WITH(Hierarchy::build(mesh), Catch::Contains("huge-sphere") && Catch::Contains("vertex 5") &&
+                                                  Catch::Contains("beyond 1e150"));
+    mesh.positions[5].x() = -1e150;  // the limit itself is accepted
+    CHECK_NOTHROW(Hierarchy::build(mesh));
+  }
   SECTION("infinite vertex") {
     Mesh mesh = scenes::icosphere(1);
     mesh.name = "inf-sphere";

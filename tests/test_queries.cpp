@@ -671,3 +671,42 @@ TEST_CASE("queries: a stream moved between meshes' points answers like a fresh o
   }
   CHECK(differ == 0);
 }
+
+TEST_CASE("queries: points that are not finite or beyond 1e153 are answered without a search", "[queries][errors]") {
+  // Every query kind gives NaN / no faces for them (squared distances would overflow), restarts
+  // coherent state, and answers the next point in range as a fresh stream does.
+  const Mesh mesh = scenes::icosphere(2);
+  const auto h = Hierarchy::build(mesh);
+  const double nan = std::numeric_limits<double>::quiet_NaN(), inf = std::numeric_limits<double>::infinity();
+  QueryStream qs(h);
+  CoherentState state;
+  std::vector<TriangleHit> hits;
+  const Vec3 near(1.2, 0.1, 0.0);
+  qs.closestCoherent(near);
+  qs.closestCoherent(near, state);
+  qs.closestWithinCoherent(near, 0.0);
+  for (const Vec3& bad : {Vec3(nan, 0, 0), Vec3(0, inf, 0), Vec3(0, 0, 2e153), Vec3(-1e160, 0, 0)}) {
+    INFO(text(bad));
+    for (const ClosestPoint& c : {qs.closest(bad), qs.closestWithin(bad, 0.0), qs.closestCoherent(bad),
+                                  qs.closestCoherent(bad, state, nullptr, inf), qs.closestWithinCoherent(bad, 0.0)}) {
+      CHECK(std::isnan(c.distance));
+      CHECK(std::isnan(c.lower));
+      CHECK(std::isnan(c.upper));
+      CHECK(c.triangle == kInvalidIndex);
+    }
+    qs.kClosest(bad, 3, hits);
+    CHECK(hits.empty());
+    qs.within(bad, inf, hits);
+    CHECK(hits.empty());
+    qs.kClosestCoherent(bad, 3, hits);
+    CHECK(hits.empty());
+    // The next point in range: the same answers as a fresh stream.
+    CHECK(sameAnswer(qs.closestCoherent(near), QueryStream(h).closest(near)));
+    CHECK(sameAnswer(qs.closestCoherent(near, state), QueryStream(h).closest(near)));
+  }
+  // Up to the limit, answered exactly (1e152 away: the distance is 1e152 to 1e-12).
+  const Vec3 far(1e152, 0, 0);
+  const ClosestPoint c = qs.closest(far);
+  REQUIRE(c.triangle != kInvalidIndex);
+  CHECK(std::abs(c.distance - bruteForceClosest(mesh, far).distance) <= 1e-12 * c.distance);
+}

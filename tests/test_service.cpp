@@ -796,3 +796,157 @@ TEST_CASE("bad input: NaN points, stale handles, wrong sizes, wrong kinds", "[se
     }
   }
 }
+
+// Within mode on a closed body: every hit of a point carries the body's sign, decided at the
+// closest point (a farther face's own feature says nothing about inside and outside).
+TEST_CASE("within mode: every hit on a closed body has the point's sign", "[service][sign]") {
+  const Mesh sphere = scenes::icosphere(2);
+  for (int kind = 0; kind < 2; ++kind) {
+    DistanceService service(ServiceOptions{1, 16});
+    const auto hierarchy = service.hierarchyFor(sphere);
+    if (kind == 0) service.addRigid(hierarchy, makePose(0.4, Vec3(1, 2, 3).normalized(), Vec3(0.1, 0, 0)));
+    else service.addDeforming(hierarchy, 0.01);
+    INFO((kind == 0 ? "rigid" : "deforming"));
+    const StepResult r = service.step(toMatrix({Vec3(2.0, 0.1, 0.2), Vec3(0.05, -0.1, 0.2)}), 10.0, QueryMode::kWithin);
+    for (size_t i = 0; i < 2; ++i) {
+      const bool inside = i == 1;
+      REQUIRE(r.hits(i).size() == sphere.triangles.size());  // every face is within 10
+      size_t wrong = 0;
+      for (const DistanceHit& hit : r.hits(i)) {
+        CHECK(hit.closed_body);
+        wrong += hit.sign != (inside ? HitSign::kInside : HitSign::kOutside);
+        wrong += hit.signed_distance != (inside ? -hit.distance : hit.distance);
+      }
+      CHECK(wrong == 0);
+    }
+  }
+}
+
+// hierarchyFor() compares the contents: a mesh changed in place (same address, same storage,
+// same counts) gets a new hierarchy of its new positions.
+TEST_CASE("hierarchyFor: a mesh changed in place gets a new hierarchy", "[service]") {
+  DistanceService service(ServiceOptions{1, 16});
+  Mesh mesh = scenes::icosphere(2);
+  const auto first = service.hierarchyFor(mesh);
+  CHECK(service.hierarchyFor(mesh) == first);  // unchanged: cached
+  const Vec3* storage = mesh.positions.data();
+  for (Vec3& x : mesh.positions) x *= 5.0;
+  REQUIRE(mesh.positions.data() == storage);
+  const auto second = service.hierarchyFor(mesh);
+  CHECK(second != first);
+  CHECK(second->mesh().positions == mesh.positions);
+  const BodyHandle body = service.addRigid(second);
+  const StepResult r = service.step(toMatrix({Vec3(10, 0, 0)}), kInf);
+  REQUIRE(r.closest(0));
+  CHECK(r.closest(0)->body == body);
+  CHECK(std::abs(r.closest(0)->distance - 5.0) < 1e-6);  // the radius-5 sphere (faceted)
+}
+
+// Finite points beyond 1e150 (where squared distances would overflow) get kOutOfRange and no
+// hits; points up to 1e150 are answered, even with an infinite distance.
+TEST_CASE("points beyond 1e150 are out of range; farther ones within it are answered", "[service][errors]") {
+  const Mesh sphere = scenes::icosphere(1);
+  DistanceService service(ServiceOptions{1, 16});
+  service.addRigid(service.hierarchyFor(sphere));
+  const std::vector<Vec3> points = {Vec3(1e160, 0, 0), Vec3(0, -1e150, 0), Vec3(2, 0, 0), Vec3(0, 0, 2e150)};
+  for (QueryMode mode : {QueryMode::kClosest, QueryMode::kWithin}) {
+    const StepResult r = service.step(toMatrix(points), kInf, mode);
+    CHECK(r.status(0) == PointStatus::kOutOfRange);
+    CHECK(r.status(3) == PointStatus::kOutOfRange);
+    CHECK(r.hits(0).empty());
+    CHECK(r.hits(3).empty());
+    CHECK(r.stats().invalid_points == 2);
+    for (size_t i : {size_t{1}, size_t{2}}) {
+      REQUIRE(r.status(i) == PointStatus::kOk);
+      REQUIRE_FALSE(r.hits(i).empty());
+      const double expected = bruteForceClosest(sphere, points[i]).distance;
+      CHECK(std::abs(r.hits(i)[0].distance - expected) <= 1e-12 * expected);
+      CHECK(std::isfinite(r.hits(i)[0].signed_distance));
+    }
+  }
+}
+
+// remove() drops the removed body's coherent states at once.
+TEST_CASE("remove drops the body's coherent states", "[service]") {
+  const Mesh sphere = scenes::icosphere(2);
+  DistanceService service(ServiceOptions{2, 8});
+  const auto hierarchy = service.hierarchyFor(sphere);
+  const BodyHandle a = service.addRigid(hierarchy);
+  const BodyHandle b = service.addRigid(hierarchy, makePose(0, Vec3::UnitZ(), Vec3(1.5, 0, 0)));
+  std::vector<Vec3> points;
+  for (int i = 0; i < 40; ++i) points.push_back(Vec3(-0.5 + 0.06 * i, 1.05, 0.0));  // near a, b or both
+  const StepResult r = service.step(toMatrix(points), 0.3);
+  const size_t pairs = r.stats().pairs;
+  size_t pairs_of_b = 0;
+  const Box3 box = service.worldBox(b);
+  for (const Vec3& p : points) {
+    const Vec3 gap = (box.lower - p).cwiseMax(p - box.upper).cwiseMax(0.0);
+    pairs_of_b += gap.norm() <= 0.3;
+  }
+  REQUIRE(pairs_of_b > 0);
+  REQUIRE(pairs_of_b < pairs);
+  CHECK(service.coherentStates() == pairs);
+  service.remove(b);
+  CHECK(service.coherentStates() == pairs - pairs_of_b);
+  service.remove(a);
+  CHECK(service.coherentStates() == 0);
+  CHECK(service.coherentStateBytes() < 1024);  // the blocks' offsets only (was 40 pairs' states)
+}
+
+// Answers never depend on the coherence tuning or history: points held over vertices and edge
+// midpoints of a grid (equidistant from several faces) get the same triangle, feature and
+// barycentric coordinates whatever reach_steps and lead_steps are, and after the states are
+// cleared.
+TEST_CASE("ties: answers do not depend on reach_steps, lead_steps or cleared states", "[service]") {
+  const Mesh grid = scenes::gridPlane(8, 1.0);
+  ServiceOptions tuned{1, 16};
+  ServiceOptions plain{1, 16};
+  plain.reach_steps = 0;
+  plain.lead_steps = 0;
+  ServiceOptions wide{2, 7};
+  wide.reach_steps = 5;
+  wide.lead_steps = 1;
+  DistanceService s1(tuned), s2(plain), s3(wide);
+  for (DistanceService* s : {&s1, &s2, &s3}) s->addRigid(s->hierarchyFor(grid));
+  Failures failures("tie-breaking across coherence settings");
+  for (int step = 0; step < 20; ++step) {
+    std::vector<Vec3> points;
+    for (int i = 1; i < 8; ++i)
+      for (int j = 1; j < 8; ++j) {
+        const double x = -0.5 + 0.125 * j, y = -0.5 + 0.125 * i;
+        const double h = 0.02 + 0.001 * ((step * 7 + i + j) % 11);  // bobbing up and down
+        points.push_back(Vec3(x, y, h));                            // over a vertex
+        points.push_back(Vec3(x + 0.0625, y, h));                   // over an edge midpoint
+      }
+    if (step == 10) s1.clearCoherentStates();
+    const StepResult a = s1.step(toMatrix(points), 0.1), b = s2.step(toMatrix(points), 0.1), c = s3.step(toMatrix(points), 0.1);
+    for (size_t i = 0; i < points.size(); ++i) {
+      REQUIRE(a.closest(i));
+      REQUIRE(b.closest(i));
+      REQUIRE(c.closest(i));
+      failures.check(sameHit(*a.closest(i), *b.closest(i)) && sameHit(*a.closest(i), *c.closest(i)),
+                     [&] { return "step " + std::to_string(step) + " point " + std::to_string(i) + ": answers differ"; });
+    }
+  }
+}
+
+// A setPositions that throws leaves the body as it was, inline faces included.
+TEST_CASE("a setPositions that throws changes nothing, inline faces included", "[service][errors]") {
+  const Mesh sphere = scenes::icosphere(2);
+  DistanceService service(ServiceOptions{1, 64});
+  const BodyHandle body = service.addDeforming(service.hierarchyFor(sphere), 0.05);
+  std::vector<Vec3> points;
+  for (const Vec3& x : scenes::nearSurfacePoints(sphere, 4000, 0.02, 3)) points.push_back(x);
+  service.step(toMatrix(points), 0.1);  // many queries per leaf block: inline faces pay
+  service.setPositions(body, sphere.positions);
+  REQUIRE(service.inlineFaces(body));
+  service.step(toMatrix({Vec3(5, 5, 5)}), 0.1);  // a step that tests no leaf of the body
+  std::vector<Vec3> bad = sphere.positions;
+  bad[3].x() = std::numeric_limits<double>::quiet_NaN();
+  CHECK_THROWS_WITH(service.setPositions(body, bad), Catch::Contains("not finite"));
+  CHECK(service.inlineFaces(body));
+  bad[3].x() = 1e160;
+  CHECK_THROWS_WITH(service.setPositions(body, bad), Catch::Contains("beyond 1e150"));
+  CHECK(service.inlineFaces(body));
+  CHECK(service.positions(body) == sphere.positions);
+}
