@@ -2,6 +2,7 @@
 
 #include <cmath>
 #include <limits>
+#include <sstream>
 
 namespace meshsweeper {
 
@@ -25,6 +26,16 @@ std::string checkMesh(const Mesh& mesh) {
         return name + ": triangle " + std::to_string(t) + " uses vertex " + std::to_string(v) +
                " but the mesh has " + std::to_string(n) + " vertices";
     }
+  }
+  // The exact distance's Gram terms are fourth powers of edge lengths (times a point's offset):
+  // outside this range of sizes they overflow or underflow and faces would be taken for
+  // segments (core/triangle_distance.cpp).
+  const double diagonal = meshDiagonal(mesh);
+  if (diagonal > kMaxMeshSize || (diagonal > 0 && diagonal < kMinMeshSize)) {
+    std::ostringstream out;
+    out << name << ": the mesh's size (bounding-box diagonal " << diagonal
+        << ") is outside the supported range [1e-50, 1e50]; rescale it";
+    return out.str();
   }
   return {};
 }

@@ -23,8 +23,14 @@ class MeshError : public std::runtime_error {
   using std::runtime_error::runtime_error;
 };
 
+// The sizes of mesh supported (bounding-box diagonal; 0, a mesh of one point, too): within
+// them, and with query points within kMaxQueryCoordinate, no step of the exact distance
+// overflows or underflows.
+inline constexpr double kMaxMeshSize = 1e50;
+inline constexpr double kMinMeshSize = 1e-50;
+
 // Checks what every builder needs: at least one triangle, finite coordinates within
-// kMaxCoordinate, indices in range.
+// kMaxCoordinate, indices in range, a size within [kMinMeshSize, kMaxMeshSize] (or 0).
 // Returns an empty string when the mesh is usable, else "NAME: problem".
 std::string checkMesh(const Mesh& mesh);
 

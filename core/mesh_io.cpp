@@ -911,6 +911,8 @@ std::vector<Vec3> readPoints(const std::string& path) {
         case NumberStatus::kNonFinite: throw MeshError(at + shown(words[k]) + " is not finite");
         case NumberStatus::kNotANumber: throw MeshError(at + shown(words[k]) + " is not a number");
       }
+      if (std::abs(p[k]) > kMaxCoordinate)
+        throw MeshError(at + shown(words[k]) + " is beyond 1e150 in magnitude (distances would overflow)");
     }
     points.push_back(p);
   }

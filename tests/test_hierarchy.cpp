@@ -10,6 +10,7 @@
 //  (e) build statistics are filled and the tree is shallow;
 //  (f) bad input throws MeshError with a message that names the mesh and the problem;
 // and one hierarchy is shared by two threads with their own QueryStreams.
+#include "core/brute_force.h"
 #include "core/hierarchy.h"
 #include "core/mesh_io.h"
 #include "core/sweep_query.h"
@@ -592,8 +593,30 @@ TEST_CASE("hierarchy: bad input throws MeshError with a useful message", "[hiera
     mesh.positions[5].x() = 2e150;
     CHECK_THROWS_WITH(Hierarchy::build(mesh), Catch::Contains("huge-sphere") && Catch::Contains("vertex 5") &&
                                                   Catch::Contains("beyond 1e150"));
-    mesh.positions[5].x() = -1e150;  // the limit itself is accepted
+    mesh = scenes::icosphere(1, 1.0, Vec3(1e150 - 2, 0, 0));  // up to the limit itself: accepted
     CHECK_NOTHROW(Hierarchy::build(mesh));
+  }
+  SECTION("sizes outside [1e-50, 1e50] (the exact distance would overflow or underflow)") {
+    for (const double scale : {1e60, 1e-60}) {
+      Mesh mesh = scenes::icosphere(1, scale);
+      mesh.name = "scaled-sphere";
+      CHECK_THROWS_WITH(Hierarchy::build(mesh), Catch::Contains("scaled-sphere") && Catch::Contains("rescale"));
+    }
+    // Within the range, exact; a mesh of one point (size 0) too.
+    for (const double scale : {1e45, 1e-45}) {
+      const Mesh mesh = scenes::icosphere(1, scale);
+      const auto h = Hierarchy::build(mesh);
+      QueryStream stream(h);
+      for (const Vec3& unit : {Vec3(0.3, 0.2, 0.1), Vec3(2, -1, 0.5), Vec3(0.57, 0.01, 0.81)}) {
+        const Vec3 p = unit * scale;
+        const double expected = bruteForceClosest(mesh, p).distance;
+        CHECK(std::abs(stream.closest(p).distance - expected) <= 1e-12 * expected);
+      }
+    }
+    Mesh point;
+    point.positions = {Vec3(1, 2, 3), Vec3(1, 2, 3), Vec3(1, 2, 3)};
+    point.triangles = {Triangle{0, 1, 2}};
+    CHECK_NOTHROW(Hierarchy::build(point));
   }
   SECTION("infinite vertex") {
     Mesh mesh = scenes::icosphere(1);

@@ -597,6 +597,9 @@ TEST_CASE("readPoints refuses malformed lines with 'PATH:LINE: problem'", "[mesh
     const std::string path = dir.write("bad.txt", std::string("0 0 ") + bad + "\n");
     CHECK_THAT(pointsError(path), StartsWith(path + ":1: ") && Contains("not finite"));
   }
+  const std::string huge = dir.write("huge.txt", "0 0 0\n0.2 0.2 1e155\n");
+  CHECK_THAT(pointsError(huge), StartsWith(huge + ":2: ") && Contains("'1e155'") && Contains("beyond 1e150"));
+  CHECK(meshsweeper::readPoints(dir.write("limit.txt", "-1e150 0 1e150\n")).size() == 1);
   const std::string missing = dir.file("missing.txt");
   CHECK_THAT(pointsError(missing), StartsWith(missing + ": ") && Contains("no such file"));
 }
