@@ -43,6 +43,7 @@
 #include <limits>
 #include <locale>
 #include <new>
+#include <iterator>
 #include <sstream>
 #include <string_view>
 
@@ -294,9 +295,12 @@ bool nextOffLine(std::istream& in, std::string& line, std::uint64_t& line_number
   return false;
 }
 
-// Called when CGAL rejected an ASCII OFF file whose header was fine: finds the first line that is
-// wrong and says why. Returns an empty string when nothing is found.
-std::string diagnoseOffBody(std::istream& in, const OffHeader& header) {
+// Checks an ASCII OFF body the way CGAL's scanner reads it (one vertex or face a line, '#'
+// comments), more strictly: CGAL parses a face's corner count and indices as doubles and
+// truncates them (0.9 becomes 0, -0.5 becomes 0), and ignores whatever follows the declared
+// faces; here they must be integers and nothing but comments may follow. Returns the first
+// problem ("line L: ..."), or an empty string.
+std::string checkOffBody(std::istream& in, const OffHeader& header) {
   in.clear();
   in.seekg(0);
   std::string line;
@@ -337,19 +341,78 @@ std::string diagnoseOffBody(std::istream& in, const OffHeader& header) {
       return where + " declares " + std::to_string(corners) + " corners but lists " +
              plural(words.size() - 1, "index");
     for (std::int64_t k = 1; k <= corners; ++k) {
-      double value;
-      if (parseDouble(words[k], value) != NumberStatus::kOk)
+      std::int64_t index = 0;
+      if (!parseInteger(words[k], index)) {
+        double value;
+        if (parseDouble(words[k], value) == NumberStatus::kOk)
+          return where + ": index " + shown(words[k]) + " is not an integer";
         return where + ": index " + shown(words[k]) + " is not a number";
-      if (value < 0 || value >= static_cast<double>(header.vertices))
+      }
+      if (index < 0 || static_cast<std::uint64_t>(index) >= header.vertices)
         return where + " uses vertex " + std::string(words[k]) + " but the file has " +
                plural(header.vertices, "vertex");
     }
   }
+  if (nextOffLine(in, line, line_number))
+    return "line " + std::to_string(line_number) + ": more data after the " +
+           plural(header.faces, "face") + " the header declares (a wrong face count?)";
   return {};
 }
 
 // ---------------------------------------------------------------------------------------------
 // OBJ.
+
+// Checks an OBJ file's faces more strictly than CGAL's read_OBJ, which reads a corner as the
+// integer its token starts with and skips to the next space (so '2.5', '3abc' or a trailing
+// word pass, and a tab glues two corners), takes index 0 for the vertex after the ones read so
+// far, and allows an index one past the last vertex. Here every corner must be 'v', 'v/t',
+// 'v//n' or 'v/t/n' with integers, v in 1..(vertices in the file) or -1..-(vertices so far).
+// Returns the first problem ("line L: ..."), or an empty string.
+std::string checkObjFaces(const std::string& text) {
+  std::uint64_t vertices = 0;
+  for (int pass = 1; pass <= 2; ++pass) {
+    std::istringstream in(text);
+    std::string line;
+    std::uint64_t line_number = 0, face = 0, so_far = 0;
+    while (std::getline(in, line)) {
+      ++line_number;
+      const std::size_t hash = line.find('#');
+      if (hash != std::string::npos) line.resize(hash);
+      const auto words = splitWords(line);
+      if (words.empty()) continue;
+      if (words[0] == "v") {
+        ++so_far;
+        continue;
+      }
+      if (pass == 1 || words[0] != "f") continue;
+      const std::string at = "line " + std::to_string(line_number) + ": face " + std::to_string(face);
+      for (std::size_t k = 1; k < words.size(); ++k) {
+        const std::string_view corner = words[k];
+        const std::size_t slash = corner.find('/');
+        std::int64_t i = 0;
+        bool ok = parseInteger(corner.substr(0, slash), i);
+        if (ok && slash != std::string_view::npos) {  // '/t', '//n' or '/t/n' after the vertex
+          const std::string_view rest = corner.substr(slash + 1);
+          const std::size_t second = rest.find('/');
+          std::int64_t unused = 0;
+          const std::string_view texture = rest.substr(0, second);
+          ok = texture.empty() ? second != std::string_view::npos : parseInteger(texture, unused);
+          if (ok && second != std::string_view::npos) ok = parseInteger(rest.substr(second + 1), unused);
+        }
+        if (!ok) return at + ": " + shown(corner) + " is not a vertex index ('v', 'v/t', 'v//n' or 'v/t/n')";
+        if (i == 0) return at + ": OBJ index 0 is not valid (indices start at 1)";
+        if (i > 0 && static_cast<std::uint64_t>(i) > vertices)
+          return at + " uses OBJ index " + std::to_string(i) + " but the file has " + plural(vertices, "vertex");
+        if (i < 0 && static_cast<std::uint64_t>(-(i + 1)) + 1 > so_far)
+          return at + " uses OBJ index " + std::to_string(i) + " but only " + plural(so_far, "vertex") +
+                 " precede it";
+      }
+      ++face;
+    }
+    vertices = so_far;
+  }
+  return {};
+}
 
 // Called when CGAL rejected an OBJ file: finds the line it stopped at, the way its read_OBJ
 // reads (one statement per line; statements it does not know make it fail). Returns an empty
@@ -799,6 +862,23 @@ Mesh readMesh(const std::string& path) {
     case Format::kObj:
       break;
   }
+  // OBJ goes to CGAL from memory, blanks made spaces (its reader splits corners on spaces only),
+  // after the strict check of its faces.
+  std::istringstream obj_text;
+  if (format == Format::kObj) {
+    std::string text(std::istreambuf_iterator<char>(in), {});
+    if (in.bad()) fail(path, "read error");
+    for (char& c : text)
+      if (isBlank(c) && c != '\r') c = ' ';
+    const std::string problem = checkObjFaces(text);
+    if (!problem.empty()) fail(path, problem);
+    obj_text.str(std::move(text));
+  }
+  std::istream& source = format == Format::kObj ? static_cast<std::istream&>(obj_text) : in;
+  if (format == Format::kOff) {
+    const std::string problem = checkOffBody(in, off_header);
+    if (!problem.empty()) fail(path, problem);
+  }
   in.clear();
   in.seekg(0);
   if (!in) fail(path, "cannot rewind the file");
@@ -810,7 +890,7 @@ Mesh readMesh(const std::string& path) {
     const auto quiet = CGAL::parameters::verbose(false);
     switch (format) {
       case Format::kOff: ok = CGAL::IO::read_OFF(in, points, polygons, quiet); break;
-      case Format::kObj: ok = CGAL::IO::read_OBJ(in, points, polygons, quiet); break;
+      case Format::kObj: ok = CGAL::IO::read_OBJ(source, points, polygons, quiet); break;
       case Format::kPly: ok = CGAL::IO::read_PLY(in, points, polygons, quiet); break;
       case Format::kStl: ok = CGAL::IO::read_STL(in, points, polygons, quiet); break;
     }
@@ -824,8 +904,7 @@ Mesh readMesh(const std::string& path) {
   }
   if (!ok) {
     std::string diagnosis;
-    if (format == Format::kOff) diagnosis = diagnoseOffBody(in, off_header);
-    if (format == Format::kObj) diagnosis = diagnoseObj(in);
+    if (format == Format::kObj) diagnosis = diagnoseObj(source);
     fail(path, cgalRejected(format, diagnosis));
   }
 

@@ -513,6 +513,40 @@ TEST_CASE("readMesh refuses non-finite coordinates", "[mesh_io]") {
   }
 }
 
+// CGAL's readers parse OFF indices as doubles and truncate them, read an OBJ corner as the
+// integer its token starts with and split corners on spaces only; readMesh checks first.
+TEST_CASE("readMesh refuses indices that are not integers, and data past the declared faces", "[mesh_io]") {
+  TempDir dir;
+  const std::string head = "OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n";
+  for (const char* bad : {"0.9", "-0.5", "1.5", "1e0"}) {
+    const std::string path = dir.write("index.off", head + "3 0 " + bad + " 2\n");
+    CHECK_THAT(readError(path), StartsWith(path + ": line 6: face 0: index '" + bad + "' is not an integer"));
+  }
+  CHECK_THAT(readError(dir.write("count.off", head + "3.5 0 1 2\n")), Contains("'3.5' is not a corner count"));
+  // A face the header does not count, or trailing text, is refused, not dropped.
+  CHECK_THAT(readError(dir.write("more.off", "OFF\n4 1 0\n0 0 0\n1 0 0\n0 1 0\n5 5 5\n3 0 1 2\n3 1 2 3\n")),
+             Contains("line 8: more data after the 1 face the header declares"));
+  CHECK_THAT(readError(dir.write("tail.off", head + "3 0 1 2\nend\n")), Contains("line 7: more data after"));
+  // Comments and blank lines after the faces are fine; so are per-face colours.
+  CHECK(meshsweeper::readMesh(dir.write("ok.off", head + "3 0 1 2 255 0 0 # red\n\n# end\n")).triangles.size() == 1);
+
+  const std::string verts = "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\n";
+  for (const char* bad : {"f 1 2.5 3", "f 1 3abc 2", "f 1 2 3 x", "f 1/ 2 3", "f /1 2 3"}) {
+    INFO(bad);
+    CHECK_THAT(readError(dir.write("bad.obj", verts + bad + "\n")), Contains("line 5: face 0") && Contains("is not a vertex index"));
+  }
+  CHECK_THAT(readError(dir.write("zero.obj", "f 0 1 2\n" + verts)), Contains("line 1: face 0: OBJ index 0 is not valid"));
+  CHECK_THAT(readError(dir.write("relative.obj", "v 0 0 0\nv 1 0 0\nf -1 -2 -3\nv 0 1 0\n")),
+             Contains("line 3: face 0 uses OBJ index -3 but only 2 vertices precede it"));
+  // Tabs separate corners as spaces do; 'v/t/n' forms, relative indices and comments are read.
+  for (const char* good : {"f\t1\t2 4", "f 1/1\t2/2/2 4//4", "f -4 -3 -1 # a comment"}) {
+    INFO(good);
+    const Mesh mesh = meshsweeper::readMesh(dir.write("good.obj", verts + good + "\n"));
+    REQUIRE(mesh.triangles.size() == 1);
+    CHECK(mesh.triangles[0] == Triangle{0, 1, 3});
+  }
+}
+
 TEST_CASE("readMesh refuses out-of-range indices and faces with fewer than 3 corners",
           "[mesh_io]") {
   TempDir dir;
@@ -522,7 +556,7 @@ TEST_CASE("readMesh refuses out-of-range indices and faces with fewer than 3 cor
              Contains("face 0 uses vertex -1"));
   // CGAL's OBJ reader lets index n+1 (one past the end) through; readMesh does not.
   CHECK_THAT(readError(dir.write("range.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 4\n")),
-             Contains("face 0 uses vertex 3 but the file has 3 vertices"));
+             Contains("line 4: face 0 uses OBJ index 4 but the file has 3 vertices"));
   CHECK_THAT(readError(dir.write("range2.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\nf 1 2 9\n")),
              Contains("line 5: face 1 uses OBJ index 9 but the file has 3 vertices"));
   const std::string ply_start = "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\n"
