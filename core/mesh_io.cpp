@@ -285,7 +285,7 @@ OffHeader checkOffHeader(const std::string& path, std::istream& in, std::uint64_
 
 // Reads the next line that is not blank and not a whole-line comment, without its '#' comment.
 // Returns false at the end of the file.
-bool nextOffLine(std::istream& in, std::string& line, std::uint64_t& line_number) {
+bool nextDataLine(std::istream& in, std::string& line, std::uint64_t& line_number) {
   while (std::getline(in, line)) {
     ++line_number;
     const std::size_t hash = line.find('#');
@@ -309,7 +309,7 @@ std::string checkOffBody(std::istream& in, const OffHeader& header) {
   while (static_cast<std::uint64_t>(in.tellg()) < header.body_offset && std::getline(in, line))
     ++line_number;
   for (std::uint64_t v = 0; v < header.vertices; ++v) {
-    if (!nextOffLine(in, line, line_number))
+    if (!nextDataLine(in, line, line_number))
       return "the file ends after " + plural(v, "vertex") + " of the " +
              std::to_string(header.vertices) + " declared";
     const auto words = splitWords(line);
@@ -328,7 +328,7 @@ std::string checkOffBody(std::istream& in, const OffHeader& header) {
              " has fewer than 3 coordinates";
   }
   for (std::uint64_t f = 0; f < header.faces; ++f) {
-    if (!nextOffLine(in, line, line_number))
+    if (!nextDataLine(in, line, line_number))
       return "the file ends after " + plural(f, "face") + " of the " +
              std::to_string(header.faces) + " declared";
     const auto words = splitWords(line);
@@ -353,7 +353,7 @@ std::string checkOffBody(std::istream& in, const OffHeader& header) {
                plural(header.vertices, "vertex");
     }
   }
-  if (nextOffLine(in, line, line_number))
+  if (nextDataLine(in, line, line_number))
     return "line " + std::to_string(line_number) + ": more data after the " +
            plural(header.faces, "face") + " the header declares (a wrong face count?)";
   return {};
@@ -374,12 +374,8 @@ std::string checkObjFaces(const std::string& text) {
     std::istringstream in(text);
     std::string line;
     std::uint64_t line_number = 0, face = 0, so_far = 0;
-    while (std::getline(in, line)) {
-      ++line_number;
-      const std::size_t hash = line.find('#');
-      if (hash != std::string::npos) line.resize(hash);
+    while (nextDataLine(in, line, line_number)) {
       const auto words = splitWords(line);
-      if (words.empty()) continue;
       if (words[0] == "v") {
         ++so_far;
         continue;
@@ -974,12 +970,8 @@ std::vector<Vec3> readPoints(const std::string& path) {
   std::vector<Vec3> points;
   std::string line;
   std::uint64_t line_number = 0;
-  while (std::getline(in, line)) {
-    ++line_number;
-    const std::size_t hash = line.find('#');
-    if (hash != std::string::npos) line.resize(hash);
+  while (nextDataLine(in, line, line_number)) {
     const auto words = splitWords(line);
-    if (words.empty()) continue;
     const std::string at = name + ":" + std::to_string(line_number) + ": ";
     if (words.size() != 3)
       throw MeshError(at + "expected 3 numbers 'x y z', found " + plural(words.size(), "field"));
