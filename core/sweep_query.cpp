@@ -949,7 +949,10 @@ void QueryStream::frontRefine(const Vec3& p, const float q[3], bool far, double&
     }
     if (e.lane < 8) {  // a fresh face at the top: the closest remaining face
       if (stop_at_tolerance) {
-        lower = upper = e.key - drift_;
+        // Exact: the answer is this face's distance, which key - drift_ can miss by an ulp;
+        // an infinite lower bound lets upperAnswer take that distance for both bounds.
+        upper = e.key - drift_;
+        lower = kInf;
         upper_face = static_cast<TriangleIndex>(e.ref);
         upper_vertex = kInvalidIndex;
         frontPush(e);

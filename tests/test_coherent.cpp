@@ -147,6 +147,11 @@ struct Checker {
             [&] { return "point " + text(r.point) + " is at " + num((r.point - p).norm()); });
     f.check(faceDistance(r.triangle, r.point) <= kAbsolute * diagonal,
             [&] { return "point " + text(r.point) + " is off its triangle " + std::to_string(r.triangle); });
+    // Exact answers carry their distance as both bounds (the dynamic front's keys, offset by the
+    // drift, can be an ulp off: the bounds must not be).
+    f.check(r.lower == r.distance && r.upper == r.distance, [&] {
+      return "bounds [" + num(r.lower) + ", " + num(r.upper) + "] of an exact distance " + num(r.distance);
+    });
   }
   // An anytime answer: lower <= truth <= upper == distance, upper - lower <= tolerance, a
   // surface point of the reported triangle at distance upper.
