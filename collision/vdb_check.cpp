@@ -13,6 +13,7 @@
 #include <chrono>
 #include <cmath>
 #include <random>
+#include <sstream>
 #include <stdexcept>
 
 namespace meshsweeper {
@@ -122,14 +123,40 @@ std::vector<Vec3> bandPoints(const Mesh& mesh, size_t n, double max_offset, uint
   return out;
 }
 
-VdbCheckReport vdbCheck(const Mesh& mesh, const std::vector<Vec3>& points, const VdbCheckOptions& options) {
+namespace {
+
+// The voxel size of a check (given, or 1/256 of the diagonal); throws MeshError, naming the
+// mesh, when none can be derived or the narrow band would need more than 2e8 voxels.
+double checkVoxel(const Mesh& mesh, const VdbCheckOptions& options) {
   const std::string problem = checkMesh(mesh);
   if (!problem.empty()) throw MeshError(problem);
+  const double voxel = options.voxel_size > 0 ? options.voxel_size : meshDiagonal(mesh) / 256;
+  if (!(voxel > 0) || !std::isfinite(voxel))
+    throw MeshError(mesh.name + ": the mesh has no extent (its vertices coincide), so no voxel size follows "
+                                "from it; give one");
+  double area = 0;
+  for (const Triangle& t : mesh.triangles) {
+    const Vec3& a = mesh.positions[t[0]];
+    area += 0.5 * (mesh.positions[t[1]] - a).cross(mesh.positions[t[2]] - a).norm();
+  }
+  const double voxels = (area / (voxel * voxel) + 1) * 2 * std::max(options.half_width, 1.0);
+  if (voxels > 2e8) {
+    std::ostringstream out;
+    out << mesh.name << ": a voxel of " << voxel << " would need about " << voxels
+        << " voxels in the narrow band (at most 2e8): choose a larger voxel";
+    throw MeshError(out.str());
+  }
+  return voxel;
+}
+
+}  // namespace
+
+VdbCheckReport vdbCheck(const Mesh& mesh, const std::vector<Vec3>& points, const VdbCheckOptions& options) {
+  const double voxel = checkVoxel(mesh, options);
   VdbCheckReport report;
   report.mesh = mesh.name;
   report.triangles = mesh.triangles.size();
   report.requested = points.size();
-  const double voxel = options.voxel_size > 0 ? options.voxel_size : meshDiagonal(mesh) / 256;
 
   auto start = std::chrono::steady_clock::now();
   const std::shared_ptr<const Hierarchy> hierarchy = Hierarchy::build(mesh);
@@ -174,9 +201,7 @@ VdbCheckReport vdbCheck(const Mesh& mesh, const std::vector<Vec3>& points, const
 }
 
 VdbCheckReport vdbCheck(const Mesh& mesh, const VdbCheckOptions& options) {
-  const std::string problem = checkMesh(mesh);
-  if (!problem.empty()) throw MeshError(problem);
-  const double voxel = options.voxel_size > 0 ? options.voxel_size : meshDiagonal(mesh) / 256;
+  const double voxel = checkVoxel(mesh, options);
   VdbCheckOptions resolved = options;
   resolved.voxel_size = voxel;
   const double offset = std::max(0.0, options.half_width - 1.5) * voxel;

@@ -92,7 +92,9 @@ struct VdbCheckReport {
 // moved along the face normal by an offset uniform in [-max_offset, max_offset). Deterministic.
 std::vector<Vec3> bandPoints(const Mesh& mesh, size_t n, double max_offset, uint64_t seed);
 
-// Compares OpenVDB's grid with the exact distances (and signs) at `points`.
+// Compares OpenVDB's grid with the exact distances (and signs) at `points`. Throws MeshError
+// (naming the mesh) for an invalid mesh, a mesh with no extent and no voxel size given, or a
+// voxel so small that the narrow band would need more than 2e8 voxels.
 VdbCheckReport vdbCheck(const Mesh& mesh, const std::vector<Vec3>& points, const VdbCheckOptions& options);
 // The same at options.points bandPoints() within (half_width - 1.5) voxels of the surface.
 VdbCheckReport vdbCheck(const Mesh& mesh, const VdbCheckOptions& options = {});

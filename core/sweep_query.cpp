@@ -774,8 +774,20 @@ ClosestPoint QueryStream::closestWithin(const Vec3& p, double tolerance) {
   if (upper_face != kInvalidIndex) hit = hitOn(upper_face, p);
   ClosestPoint out = upperAnswer(h, g.positions, upper_face != kInvalidIndex ? &hit : nullptr,
                                  upper_vertex, upper, lower);
+  if (tolerance <= 0) canonicalExact(p, out);
   out.counters = counters_;
   return out;
+}
+
+// An exact answer of the priority process, given as closest() gives it: among the faces at the
+// same distance the lowest index (the process stops at whichever it meets first). A depth-first
+// search warm-started at the answer's face opens only what could tie with it.
+void QueryStream::canonicalExact(const Vec3& p, ClosestPoint& out) {
+  if (out.triangle == kInvalidIndex) return;
+  TriangleIndex face = out.triangle;
+  depthFirst(p, squaredDistanceToFace(face, p), 0, face);
+  if (face == out.triangle && out.distance == out.upper && out.lower == out.upper) return;
+  fillFromHit(out, hitOn(face, p));
 }
 
 void QueryStream::kClosest(const Vec3& p, size_t k, std::vector<TriangleHit>& out) {
@@ -1028,6 +1040,7 @@ ClosestPoint QueryStream::closestWithinCoherent(const Vec3& p, double tolerance)
   if (upper_face != kInvalidIndex) hit = hitOn(upper_face, p);
   ClosestPoint out = upperAnswer(h, g.positions, upper_face != kInvalidIndex ? &hit : nullptr,
                                  upper_vertex, upper, lower_);
+  if (tolerance <= 0) canonicalExact(p, out);
   out.counters = counters_;
   return out;
 }

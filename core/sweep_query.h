@@ -116,8 +116,9 @@ class QueryStream {
   // Every query takes a point with finite coordinates within kMaxQueryCoordinate (core/types.h);
   // any other point is answered, never searched: NaN distance and bounds, triangle
   // kInvalidIndex (closest*), no faces (kClosest*, within), and coherent state restarts.
-  // closest() and closestCoherent() give ties at equal distance to the lowest triangle index,
-  // so their answers never depend on the search order, the warm start or a cached set.
+  // Exact answers (closest(), closestCoherent(), and closestWithin*() with tolerance 0) give
+  // ties at equal distance to the lowest triangle index, so they never depend on the search
+  // order, the warm start or a cached set.
 
   // Exact closest point: depth-first, closest child first, pruning with the best distance.
   ClosestPoint closest(const Vec3& p);
@@ -202,6 +203,7 @@ class QueryStream {
                           TriangleIndex& best_face, bool sorted = false);
   void orderIntoBlocks(float* block_lower, size_t blocks);
   void storeSet(const Vec3& anchor, double set_reach, CoherentState& state) const;
+  void canonicalExact(const Vec3& p, ClosestPoint& out);
   bool testSet(const CoherentState& state, const Vec3& p, double moved, double within, double& best2,
                TriangleIndex& face);
   double depthFirst(const Vec3& p, double start2, double reach, TriangleIndex& best_face,

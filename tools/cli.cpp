@@ -160,7 +160,7 @@ void Output::close() {
     file_ = nullptr;
     owned_ = false;
   }
-  if (failed_) throw IoError(path_ + ": write failed");
+  if (failed_) throw IoError((path_ == "-" ? std::string("standard output") : path_) + ": write failed");
 }
 
 std::string jsonString(const std::string& text) {

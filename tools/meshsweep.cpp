@@ -101,7 +101,10 @@ int dispatch(int argc, char** argv) {
 int main(int argc, char** argv) {
   using namespace meshsweeper::cli;
   try {
-    return dispatch(argc, argv);
+    const int status = dispatch(argc, argv);
+    // Every command's report to standard output (printf or Output) must have reached it.
+    if (std::fflush(stdout) != 0 || std::ferror(stdout)) throw IoError("standard output: write failed");
+    return status;
   } catch (const UsageError& e) {
     std::fprintf(stderr, "meshsweep: %s\n", e.what());
     return kExitUsage;

@@ -218,6 +218,47 @@ if(DATA_DIR AND EXISTS "${DATA_DIR}/armadillo.off")
   endforeach()
 endif()
 
+# Ties: points over the vertices and edge midpoints of a grid are equidistant from several
+# triangles; a coherent (--path) run must report the same triangles as a plain one.
+file(WRITE "${WORK_DIR}/grid.off" "OFF\n9 4 0\n0 0 0\n1 0 0\n2 0 0\n0 1 0\n1 1 0\n2 1 0\n0 2 0\n1 2 0\n2 2 0\n"
+  "4 0 1 4 3\n4 1 2 5 4\n4 3 4 7 6\n4 4 5 8 7\n")
+set(tie_points "")
+foreach(h 0.5 0.25 0.75 0.1 0.3)
+  foreach(xy "1 1" "0.5 1" "1 0.5" "1.5 1" "1 1.5" "0 0" "2 2" "1 0" "0.5 0.5")
+    string(APPEND tie_points "${xy} ${h}\n")
+  endforeach()
+endforeach()
+file(WRITE "${WORK_DIR}/tie_points.txt" "${tie_points}")
+check(ties_plain RC 0 ARGS closest grid.off tie_points.txt --out ties_plain.csv ERR "\"rows\": 45")
+check(ties_path RC 0 ARGS closest grid.off tie_points.txt --path --out ties_path.csv ERR "\"rows\": 45")
+check(ties_path_exact RC 0 ARGS closest grid.off tie_points.txt --path --tolerance 0 --out ties_front.csv
+  ERR "\"rows\": 45")
+file(READ "${WORK_DIR}/ties_plain.csv" plain_text)
+foreach(coherent ties_path.csv ties_front.csv)
+  file(READ "${WORK_DIR}/${coherent}" coherent_text)
+  if(plain_text STREQUAL coherent_text)
+    math(EXPR passed "${passed} + 1")
+  else()
+    message("FAIL ${coherent} differs from ties_plain.csv")
+    math(EXPR failed "${failed} + 1")
+  endif()
+endforeach()
+
+# A report that cannot be written (a full device) is an error, whatever the command.
+if(EXISTS /dev/full)
+  foreach(command "info;quad.off" "closest;quad.off;points.txt" "hausdorff;quad.off;quad.off")
+    execute_process(COMMAND "${MESHSWEEP}" ${command} WORKING_DIRECTORY "${WORK_DIR}"
+      OUTPUT_FILE /dev/full RESULT_VARIABLE rc ERROR_VARIABLE err)
+    string(FIND "${err}" "standard output: write failed" at)
+    if(rc EQUAL 1 AND NOT at EQUAL -1)
+      math(EXPR passed "${passed} + 1")
+    else()
+      message("FAIL ${command} > /dev/full: exit status '${rc}', stderr: ${err}")
+      math(EXPR failed "${failed} + 1")
+    endif()
+  endforeach()
+endif()
+
 message("meshsweep_cli: ${passed} passed, ${failed} failed")
 if(failed GREATER 0)
   message(FATAL_ERROR "meshsweep_cli: ${failed} case(s) failed")
