@@ -128,7 +128,8 @@ class Contractor {
     }
     return u;
   }
-  // Calls f(corner) for each live corner of v, unlinking corners of deleted triangles.
+  // Calls f(corner) for each live corner of v, unlinking corners of deleted triangles on the
+  // way, until f returns false.
   template <class F>
   void forEachCorner(VertexIndex v, F&& f) {
     uint32_t prev = kNone;
@@ -137,7 +138,7 @@ class Contractor {
       if (!alive_[c / 3]) {
         if (prev == kNone) head_[v] = following; else next_[prev] = following;
       } else {
-        f(c);
+        if (!f(c)) return;
         prev = c;
       }
       c = following;
@@ -146,7 +147,10 @@ class Contractor {
   // star <- the live corners of v, in list order.
   void gatherStar(VertexIndex v, std::vector<uint32_t>& star) {
     star.clear();
-    forEachCorner(v, [&](uint32_t c) { star.push_back(c); });
+    forEachCorner(v, [&](uint32_t c) {
+      star.push_back(c);
+      return true;
+    });
   }
   template <class ForEachV, class ForEachU>
   bool findDeletions(VertexIndex v, VertexIndex u, ForEachV&& for_each_v, ForEachU&& for_each_u,
@@ -155,14 +159,19 @@ class Contractor {
   bool findDeletions(VertexIndex v, VertexIndex u, const std::vector<uint32_t>& v_star,
                      std::vector<Deletion>& deletions) {
     return findDeletions(
-        v, u, [&](auto&& f) { for (uint32_t c : v_star) f(c / 3); },
-        [&](auto&& f) { forEachCorner(u, [&](uint32_t c) { f(c / 3); }); }, deletions);
+        v, u,
+        [&](auto&& f) {
+          for (uint32_t c : v_star)
+            if (!f(c / 3)) return;
+        },
+        [&](auto&& f) { forEachCorner(u, [&](uint32_t c) { return f(c / 3); }); }, deletions);
   }
   // Whether v -> u is legal on the mesh of the round's start (stars from buildStars()).
   bool legalAtRoundStart(VertexIndex v, VertexIndex u) {
     auto star = [&](VertexIndex x) {
       return [this, x](auto&& f) {
-        for (uint32_t i = star_begin_[x]; i < star_begin_[x + 1]; ++i) f(star_slot_[i]);
+        for (uint32_t i = star_begin_[x]; i < star_begin_[x + 1]; ++i)
+          if (!f(star_slot_[i])) return;
       };
     };
     return findDeletions(v, u, star(v), star(u), deletions_);
@@ -213,6 +222,8 @@ class Contractor {
   std::vector<uint32_t> star_begin_;       // [vertex + 1] CSR into star_slot_
   std::vector<uint32_t> star_slot_;        // live triangles per vertex at the round's start
   std::vector<Deletion> deletions_;
+  std::vector<uint8_t> listed_;       // [slot] in deletions_ (findDeletions; cleared after)
+  std::vector<uint32_t> third_group_; // [vertex] a deletion with that third corner (findDeletions)
   size_t live_triangles_ = 0;
 };
 
@@ -221,29 +232,50 @@ class Contractor {
 // v's star that does not hold u and holds a. Returns false when some deleted triangle leaves
 // edge (u, a) in no surviving triangle. for_each_v(f) / for_each_u(f) call f(slot) for the
 // live triangles of v / u, in list order.
+// Linear in the two stars (many triangles on one edge, or copies of one triangle, made it
+// quadratic): deletions are listed with a per-slot mark, and those with the same third corner
+// share their adopter, found through a per-vertex group index; the walks stop once every
+// deletion has one.
 template <class ForEachV, class ForEachU>
 bool Contractor::findDeletions(VertexIndex v, VertexIndex u, ForEachV&& for_each_v, ForEachU&& for_each_u,
                                std::vector<Deletion>& deletions) {
   deletions.clear();
   for_each_v([&](uint32_t slot) {
-    if (!holds(slot, u)) return;
-    bool listed = false;
-    for (const Deletion& d : deletions) listed |= d.slot == slot;
-    if (!listed) deletions.push_back({slot, kNone, thirdVertex(slot, v, u)});
+    if (holds(slot, u) && !listed_[slot]) {
+      listed_[slot] = 1;
+      deletions.push_back({slot, kNone, thirdVertex(slot, v, u)});
+    }
+    return true;
   });
   if (deletions.empty()) return true;
-  size_t missing = deletions.size();
+  // One group per distinct third corner: the group's first deletion carries the adopter.
+  size_t missing = 0;
+  for (size_t i = 0; i < deletions.size(); ++i) {
+    listed_[deletions[i].slot] = 0;
+    uint32_t& group = third_group_[deletions[i].third];
+    if (group == kNone) {
+      group = static_cast<uint32_t>(i);
+      ++missing;
+    }
+  }
   auto adoptFrom = [&](uint32_t slot, VertexIndex other) {
-    if (holds(slot, other)) return;
-    for (Deletion& d : deletions) {
-      if (d.adopter == kNone && holds(slot, d.third)) {
-        d.adopter = slot;
+    if (holds(slot, other)) return missing > 0;
+    for (int k = 0; k < 3; ++k) {
+      const uint32_t group = third_group_[tri_[3 * slot + k]];
+      if (group != kNone && deletions[group].adopter == kNone) {
+        deletions[group].adopter = slot;
         --missing;
       }
     }
+    return missing > 0;
   };
-  for_each_u([&](uint32_t slot) { if (missing > 0) adoptFrom(slot, v); });
-  if (missing > 0) for_each_v([&](uint32_t slot) { if (missing > 0) adoptFrom(slot, u); });
+  for_each_u([&](uint32_t slot) { return adoptFrom(slot, v); });
+  if (missing > 0) for_each_v([&](uint32_t slot) { return adoptFrom(slot, u); });
+  for (Deletion& d : deletions) {
+    const uint32_t group = third_group_[d.third];
+    if (group != kNone) d.adopter = deletions[group].adopter;
+  }
+  for (const Deletion& d : deletions) third_group_[d.third] = kNone;
   return missing == 0;
 }
 
@@ -372,6 +404,8 @@ void Contractor::run(CoverTree& tree, std::vector<VertexIndex>& contracted_into,
   radius_.assign(n, 0.0);
   holder_.resize(m);
   open_.assign(m, 0);
+  listed_.assign(m, 0);
+  third_group_.assign(n, kNone);
   into_.assign(n, kNone);
   // Each node a contraction creates replaces a deleted triangle's: at most m of them.
   tree.parent.reserve(2 * m);
@@ -490,6 +524,10 @@ void Contractor::run(CoverTree& tree, std::vector<VertexIndex>& contracted_into,
     stats.contractions += applied;
     for (VertexIndex v : active) locked[v] = 0;
     if (applied == 0) break;
+    // A round that contracts almost nothing (each vertex takes one contraction a round, so a
+    // vertex thousands of triangles hang on, as on an edge shared by many, would take as many
+    // rounds, each a pass over the mesh): stop, and the top tree splits the rest by position.
+    if (static_cast<size_t>(applied) * 1024 < live_triangles_) break;
     // Contracted vertices leave the active list at the next filtering (their lists are empty).
   }
   for (size_t t = 0; t < m; ++t) {

@@ -568,6 +568,49 @@ TEST_CASE("hierarchy: a 16-triangle base still gives a shallow tree on soups", "
   }
 }
 
+// Valid but hostile topologies: 65,536 copies of one triangle, 65,536 triangles on one edge
+// (a book), and a polygon with 65,536 corners fanned over four vertices. Each vertex takes one
+// contraction a round and each proposal walked the stars pairwise, so these builds took
+// seconds to minutes (quadratic); now linear. The trees must hold their invariants and answer
+// exactly.
+TEST_CASE("hierarchy: many triangles on one edge or one triangle build and answer exactly", "[hierarchy]") {
+  constexpr uint32_t kCount = 1u << 16;
+  constexpr double kPi = 3.14159265358979323846;
+  Mesh copies, book, fan;
+  copies.name = "copies";
+  copies.positions = {Vec3(0, 0, 0), Vec3(1, 0, 0), Vec3(0.2, 1, 0.1)};
+  copies.triangles.assign(kCount, Triangle{0, 1, 2});
+  book.name = "book";
+  book.positions = {Vec3(0, 0, 0), Vec3(0, 0, 1)};
+  for (uint32_t i = 0; i < kCount; ++i) {
+    const double angle = 2 * kPi * i / kCount;
+    book.positions.push_back(Vec3(std::cos(angle), std::sin(angle), 0.5));
+    book.triangles.push_back(Triangle{0, 1, i + 2});
+  }
+  fan.name = "fan";
+  fan.positions = {Vec3(0, 0, 0), Vec3(1, 0, 0), Vec3(1, 1, 0), Vec3(0, 1, 0.2)};
+  for (uint32_t k = 1; k + 1 < kCount; ++k) fan.triangles.push_back(Triangle{0, k % 4, (k + 1) % 4});
+  for (const Mesh* mesh : {&copies, &book, &fan}) {
+    INFO(mesh->name);
+    const auto h = Hierarchy::build(*mesh);
+    CHECK(validate(*h) == "");
+    QueryStream stream(h);
+    for (const Vec3& p : {Vec3(0.3, 0.2, 0.5), Vec3(-1, 2, 3), Vec3(0.5, 0.5, 0.5), Vec3(0, 0, 0.4)}) {
+      const ClosestPoint c = stream.closest(p);
+      const auto truth = bruteForceClosest(*mesh, p);
+      CHECK(c.distance == Approx(truth.distance).epsilon(1e-12).margin(1e-15));
+      // Ties go to the lowest index among the least squared distances (brute force compares
+      // the distances, whose square roots can merge values an ulp apart).
+      auto squared = [&](TriangleIndex t) {
+        const Triangle& f = mesh->triangles[t];
+        return squaredDistanceToTriangle(p, mesh->positions[f[0]], mesh->positions[f[1]], mesh->positions[f[2]]);
+      };
+      CHECK(squared(c.triangle) <= squared(truth.triangle));
+      if (squared(c.triangle) == squared(truth.triangle)) CHECK(c.triangle <= truth.triangle);
+    }
+  }
+}
+
 TEST_CASE("hierarchy: bad input throws MeshError with a useful message", "[hierarchy]") {
   SECTION("empty mesh") {
     Mesh mesh;
