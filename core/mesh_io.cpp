@@ -679,6 +679,9 @@ void walkBinaryPly(const std::string& path, std::istream& in, const PlyHeader& h
     }
     in.seekg(static_cast<std::streamoff>(position));
   }
+  if (position < file_size)
+    fail(path, std::to_string(file_size - position) + " bytes follow the last element the header declares "
+               "(wrong counts or extra data)");
 }
 
 // Reads the next whitespace-separated word of an ASCII PLY body; false at the end.
@@ -756,6 +759,8 @@ void walkAsciiPly(const std::string& path, std::istream& in, const PlyHeader& he
       }
     }
   }
+  if (nextPlyWord(buffer, word))
+    fail(path, "more data (" + shown(word) + ") after the last element the header declares (wrong counts?)");
 }
 
 // ---------------------------------------------------------------------------------------------

@@ -573,6 +573,20 @@ TEST_CASE("readMesh refuses out-of-range indices and faces with fewer than 3 cor
              Contains("face 1 has 0 corners"));
   CHECK_THAT(readError(dir.write("two.ply", ply_start + "2 0 1\n")),
              Contains("face 0 has 2 corners"));
+  // Data past the elements the header declares (a face it does not count) is refused.
+  CHECK_THAT(readError(dir.write("extra.ply", ply_start + "3 0 1 2\n3 2 1 0\n")),
+             Contains("more data ('3') after the last element the header declares"));
+  CHECK(meshsweeper::readMesh(dir.write("fine.ply", ply_start + "3 0 1 2\n\n")).triangles.size() == 1);
+  std::string binary = "ply\nformat binary_little_endian 1.0\nelement vertex 3\nproperty float x\n"
+                       "property float y\nproperty float z\nelement face 1\n"
+                       "property list uchar int vertex_indices\nend_header\n";
+  for (float c : {0.f, 0.f, 0.f, 1.f, 0.f, 0.f, 0.f, 1.f, 0.f}) putF32(binary, c);
+  putU8(binary, 3);
+  for (std::uint32_t v : {0u, 1u, 2u}) putU32(binary, v);
+  CHECK(meshsweeper::readMesh(dir.write("fine_binary.ply", binary)).triangles.size() == 1);
+  putU32(binary, 7);
+  CHECK_THAT(readError(dir.write("extra_binary.ply", binary)),
+             Contains("4 bytes follow the last element the header declares"));
 }
 
 TEST_CASE("readMesh refuses meshes without faces", "[mesh_io]") {
