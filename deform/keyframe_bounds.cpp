@@ -72,7 +72,7 @@ KeyframeBody::KeyframeBody(std::shared_ptr<const Hierarchy> hierarchy,
 
 void KeyframeBody::interpolateBounds(double t) {
   const size_t last = frames_.size() - 1;
-  t = std::clamp(std::isfinite(t) ? t : 0.0, 0.0, static_cast<double>(last));
+  t = std::clamp(std::isnan(t) ? 0.0 : t, 0.0, static_cast<double>(last));  // +inf: the last frame
   const size_t f = std::min(static_cast<size_t>(t), last == 0 ? 0 : last - 1);
   const double s = last == 0 ? 0.0 : t - static_cast<double>(f);
   time_ = t;

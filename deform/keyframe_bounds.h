@@ -17,7 +17,7 @@ class KeyframeBody {
   // Throws std::invalid_argument otherwise. Costs one radius computation per frame.
   KeyframeBody(std::shared_ptr<const Hierarchy> hierarchy, std::vector<std::vector<Vec3>> frames);
 
-  // Sets the time t in [0, frameCount() - 1] (clamped): frame floor(t) and the next, weight
+  // Sets the time t in [0, frameCount() - 1] (clamped; NaN: 0): frame floor(t) and the next, weight
   // t - floor(t). Interpolates positions and bounds (the per-frame cost; no geometry rebuilt).
   void setTime(double t);
   double time() const { return time_; }

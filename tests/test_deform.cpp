@@ -334,7 +334,9 @@ void checkKeyframes(const Mesh& mesh, size_t frame_count, size_t points_per_time
   QueryStream stream(h);
   stream.setGeometry(&body.geometry());
   const double end = static_cast<double>(frame_count - 1);
-  std::vector<double> times = {0, 0.25, 0.5, 1, 1.37, end - 0.5, end - 1e-9, end, end / 3, 0.999999, -0.5, end + 4};
+  const double inf = std::numeric_limits<double>::infinity();
+  std::vector<double> times = {0, 0.25, 0.5, 1, 1.37, end - 0.5, end - 1e-9, end, end / 3, 0.999999, -0.5, end + 4,
+                               inf, -inf};  // clamped: +inf is the last frame
   QueryChecks checks;
   Failures positions("KeyframeBody::positions() vs interpolation"), bounds("validateGeometry");
   for (size_t ti = 0; ti < times.size(); ++ti) {

@@ -64,6 +64,23 @@ double surfaceArea(const Mesh& mesh) {
   return area;
 }
 
+// x with 7 significant digits, rounded down (up = false) or up, so that a printed certified
+// interval still contains the value.
+std::string bound7(double x, bool up) {
+  if (!std::isfinite(x)) return x > 0 ? "inf" : (x < 0 ? "-inf" : "nan");
+  char text[32];
+  double y = x;
+  for (int attempt = 0; attempt < 4; ++attempt) {
+    std::snprintf(text, sizeof text, "%.7g", y);
+    const double shown = std::strtod(text, nullptr);
+    if (up ? shown >= x : shown <= x) break;
+    // One unit of the 7th digit beyond the rounded value, in the needed direction.
+    const double unit = shown == 0 ? std::abs(x) : std::pow(10.0, std::floor(std::log10(std::abs(shown))) - 6);
+    y = up ? shown + unit : shown - unit;
+  }
+  return text;
+}
+
 std::string jsonNumber(double x) {
   if (!std::isfinite(x)) return "null";
   char text[32];
@@ -130,8 +147,8 @@ void writeColors(Output& out, const Mesh& mesh, const std::vector<double>& dista
 // One direction of the summary.
 void printDirection(std::FILE* s, const char* name, const OneSidedHausdorff& h, double diagonal,
                     double tolerance, const char* from, const char* to) {
-  std::fprintf(s, "  %s  max in [%.7g, %.7g]  (%.5f%% .. %.5f%% of diagonal)\n", name, h.lower,
-               h.upper, percent(h.lower, diagonal), percent(h.upper, diagonal));
+  std::fprintf(s, "  %s  max in [%s, %s]  (%.5f%% .. %.5f%% of diagonal)\n", name, bound7(h.lower, false).c_str(),
+               bound7(h.upper, true).c_str(), percent(h.lower, diagonal), percent(h.upper, diagonal));
   std::fprintf(s, "          mean %.7g  RMS %.7g  (%.5f%%, %.5f%%; estimates)\n", h.mean, h.rms,
                percent(h.mean, diagonal), percent(h.rms, diagonal));
   std::fprintf(s, "          lower bound at (%.9g, %.9g, %.9g) on %s triangle %u,\n", h.at.x(),
@@ -217,8 +234,9 @@ int runHausdorff(int argc, char** argv, int first) {
                percent(r.tolerance, diagonal));
   printDirection(s, "A -> B", r.a_to_b, diagonal, r.tolerance, "A", "B");
   printDirection(s, "B -> A", r.b_to_a, diagonal, r.tolerance, "B", "A");
-  std::fprintf(s, "\n  Hausdorff distance in [%.7g, %.7g]  (%.5f%% .. %.5f%% of diagonal)%s\n",
-               r.lower, r.upper, percent(r.lower, diagonal), percent(r.upper, diagonal),
+  std::fprintf(s, "\n  Hausdorff distance in [%s, %s]  (%.5f%% .. %.5f%% of diagonal)%s\n",
+               bound7(r.lower, false).c_str(), bound7(r.upper, true).c_str(), percent(r.lower, diagonal),
+               percent(r.upper, diagonal),
                r.converged ? "" : "  (tolerance not reached: refinement hit rounding size)");
   std::fprintf(s, "  time %.3f s (hierarchies %.3f s), %llu samples, %llu triangles refined\n",
                r.seconds, r.build_seconds, static_cast<unsigned long long>(r.counters.samples),

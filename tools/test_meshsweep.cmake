@@ -240,6 +240,12 @@ check(ties_path_exact RC 0 ARGS closest grid.off tie_points.txt --path --toleran
 same_files(ties_plain.csv ties_path.csv)
 same_files(ties_plain.csv ties_front.csv)
 
+# The summary's certified interval is printed rounded outward: h(quad -> point (3, 1, 2)) is
+# sqrt(14) = 3.74165738..., so its upper bound prints as 3.741658, not 3.741657.
+file(WRITE "${WORK_DIR}/point.off" "OFF\n3 1 0\n3 1 2\n3 1 2\n3 1 2\n3 0 1 2\n")
+check(hausdorff_outward RC 0 ARGS hausdorff quad.off point.off
+  OUT "Hausdorff distance in [3.741657, 3.741658]" "B -> A  max in [2.828427, 2.828428]")
+
 # A report that cannot be written (a full device) is an error, whatever the command.
 if(EXISTS /dev/full)
   foreach(command "info;quad.off" "closest;quad.off;points.txt" "hausdorff;quad.off;quad.off")
