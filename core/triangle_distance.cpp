@@ -9,7 +9,11 @@
 //   2. det = |ab x ac|^2; if det <= kDegenerate * |ab|^2 |ac|^2 (sin^2 of the largest angle; this
 //      holds for segments, points and caps) the triangle is degenerate: answer with the closest
 //      of its three segments (zero-length segments give their end point);
-//   3. otherwise Ericson's tests, first match wins, with d1 = ab.ap, d2 = ac.ap, e = bc.bp,
+//   3. if sin^2 of the largest angle < kSliver (a sliver: the Gram numerators below lose
+//      eps / sin^2 of |ap|), the projection q of p onto the plane when q lies in the triangle
+//      (edge functions n.(edge x (q - corner)) >= 0, accurate to eps / sin), else the closest
+//      of the three segments;
+//   otherwise Ericson's tests, first match wins, with d1 = ab.ap, d2 = ac.ap, e = bc.bp,
 //      vb = |ac|^2 d1 - (ab.ac) d2, vc = |ab|^2 d2 - (ab.ac) d1, va = det - vb - vc:
 //        vertex a   d1 <= 0 and d2 <= 0
 //        vertex b   d1 >= |ab|^2 and e <= 0
@@ -26,14 +30,14 @@
 // for bit (the tests compare them on random and degenerate lanes).
 //
 // What is not computed exactly (\bug):
-//  - caps (three nearly collinear corners: sin^2 of the largest angle near kDegenerate, a largest
-//    angle within about 0.001 degree of 180) lose accuracy: on the face side of the threshold the
-//    Gram system moves the point by about eps * |ap| / sin^2 inside the plane, on the other side
-//    the segment answer is off by up to the cap's height. Measured against a 113-bit reference,
-//    squared distances are off by up to about 1e-12 |longest edge|^2 there; elsewhere the error
-//    is rounding of the returned point (a few eps * |coordinates| * distance);
+//  - caps below kDegenerate (a largest angle within about 0.001 degree of 180) are answered by
+//    their segments, off by up to the cap's height from the plane; slivers above it go through
+//    the projection (step 3), whose error is about eps * |ap| / sin of the largest angle (at
+//    the threshold, 1e-11 of |ap|); elsewhere the error is rounding of the returned point (a
+//    few eps * |coordinates| * distance);
 //  - the Gram terms are fourth powers of coordinate differences: beyond about 1e75 (or below
-//    1e-75) they overflow (underflow) and the triangle is treated as degenerate.
+//    1e-75) they overflow (underflow) and the triangle is treated as degenerate (meshes are
+//    limited to sizes in [1e-50, 1e50], core/mesh.h).
 #include "core/triangle_distance.h"
 
 #include <cmath>
@@ -48,6 +52,11 @@ namespace {
 // sin^2 of the largest angle below which a triangle is answered by its segments; 1e-10 balances
 // the two errors described above (tuned on caps against a 113-bit reference).
 constexpr double kDegenerate = 1e-10;
+// sin^2 of the largest angle below which a triangle is a sliver (a largest angle beyond about
+// 178.2 degrees): the Gram numerators lose about eps / sin^2 of |ap| there (measured: a point
+// on a sliver of sin^2 1.4e-10 answered 7.6e-7 away), so the face case is decided on the
+// projection onto the plane instead (errors of about eps / sin).
+constexpr double kSliver = 1e-3;
 
 // ---------------------------------------------------------------------------------------------
 // Arithmetic shared by the scalar function and the block (T = double or a SIMD vector). Every
@@ -128,6 +137,7 @@ struct Frame {
   T dab;              // ab.ac
   T d1, d2, e;        // ab.ap, ac.ap, bc.bp
   T det;              // |ab x ac|^2
+  V3<T> n;            // ab x ac
   T vb, vc, va;       // Gram numerators (meaningful when not degenerate)
 };
 
@@ -143,8 +153,8 @@ inline void fillFrame(const V3<T>& p, Frame<T>& f) {
   f.d1 = dot(f.ab, ap);
   f.d2 = dot(f.ac, ap);
   f.e = dot(f.bc, bp);
-  const V3<T> n = cross(f.ab, f.ac);
-  f.det = dot(n, n);
+  f.n = cross(f.ab, f.ac);
+  f.det = dot(f.n, f.n);
   f.vc = mulAdd(f.lab, f.d2, -(f.dab * f.d1));
   f.vb = mulAdd(f.lac, f.d1, -(f.dab * f.d2));
   f.va = f.det - f.vb - f.vc;
@@ -152,7 +162,30 @@ inline void fillFrame(const V3<T>& p, Frame<T>& f) {
 
 // Not safely a triangle: sin^2 of the largest angle <= kDegenerate (or NaN).
 inline bool isDegenerate(double det, double lab, double lac) {
-  return !(det > kDegenerate * lab * lac);
+  return !(det > kDegenerate * (lab * lac));
+}
+
+// A sliver (when not degenerate): sin^2 of the largest angle below kSliver.
+inline bool isSliver(double det, double lab, double lac) { return !(det > kSliver * (lab * lac)); }
+
+// The projection q of p onto the triangle's plane, q = p - (n.ap / n.n) n, and the edge
+// functions of q: wa = n.(bc x bq), wb = n.(ca x cq), wc = n.(ab x aq), all >= 0 when q lies in
+// the triangle (wa : wb : wc are its barycentric coordinates, as va : vb : vc are). Each is
+// accurate to about eps / sin of the largest angle, where the Gram numerators lose eps / sin^2.
+template <class T>
+struct Projection {
+  V3<T> q;
+  T wa, wb, wc;
+};
+template <class T>
+inline Projection<T> projectOnPlane(const V3<T>& p, const Frame<T>& f) {
+  Projection<T> r;
+  const T t = dot(f.n, p - f.a) / f.det;
+  r.q = {mulAdd(-t, f.n.x, p.x), mulAdd(-t, f.n.y, p.y), mulAdd(-t, f.n.z, p.z)};
+  r.wa = dot(f.n, cross(f.bc, r.q - f.b));
+  r.wb = dot(f.n, cross(f.a - f.c, r.q - f.c));
+  r.wc = dot(f.n, cross(f.ab, r.q - f.a));
+  return r;
 }
 
 inline double clamp01(double x) { return x > 1.0 ? 1.0 : (x < 0.0 ? 0.0 : x); }
@@ -209,8 +242,27 @@ inline double closestImpl(const Vec3& pe, const Vec3& ae, const Vec3& be, const 
     res.feature = feature;
   };
 
-  if (isDegenerate(f.det, f.lab, f.lac)) {
+  const bool degenerate = isDegenerate(f.det, f.lab, f.lac);
+  const bool sliver = !degenerate && isSliver(f.det, f.lab, f.lac);
+  Projection<double> proj{};
+  if (sliver) proj = projectOnPlane(p, f);
+  const bool sliver_face = sliver && proj.wa >= 0.0 && proj.wb >= 0.0 && proj.wc >= 0.0;
+  if (sliver_face) {
+    // The projection lies in the sliver: the closest point, from its barycentric coordinates.
+    const double s = proj.wa + proj.wb + proj.wc;  // > 0: a positive sum of three >= 0 terms
+    const double v = proj.wb / s;
+    const double w = proj.wc / s;
+    res.point = pointAt(f.a, v, f.ab, w, f.ac);
+    if (kDetails) {
+      res.bary[0] = proj.wa / s;
+      res.bary[1] = v;
+      res.bary[2] = w;
+      res.feature = kLocalFace;
+    }
+  } else if (degenerate || sliver) {
     // Closest of the segments ab, bc, ac (first wins ties); a segment end is returned exactly.
+    // For a sliver whose plane projection of p falls outside it, the closest point is on its
+    // boundary.
     struct Segment {
       const V3<double>* o;
       const V3<double>* end;
@@ -455,15 +507,26 @@ inline void blockLanes(const V3<typename Ops::V>& p, const TriangleBlock8& block
   const V3<V> e1v = select3<Ops>(is_bc, f.bc, f.ab);
   V squared = squaredDistance(p, pointAt(o, v, e1v, w, f.ac));
 
-  const M degenerate = Ops::notM(Ops::gt(f.det, Ops::set1(kDegenerate) * f.lab * f.lac));
-  if (Ops::any(degenerate)) {
+  // Thin lanes (slivers and degenerate ones; NaN too) are rare: one test for both.
+  const V lab_lac = f.lab * f.lac;
+  const M thin = Ops::notM(Ops::gt(f.det, Ops::set1(kSliver) * lab_lac));
+  if (Ops::any(thin)) {
+    const M degenerate = Ops::notM(Ops::gt(f.det, Ops::set1(kDegenerate) * lab_lac));
+    const M sliver = Ops::andNot(thin, degenerate);
     const V s_ab = segmentSquared<Ops>(p, f.a, f.b, f.ab, f.d1, f.lab, f.ac);
     const V s_bc = segmentSquared<Ops>(p, f.b, f.c, f.bc, f.e, f.lbc, f.ac);
     const V s_ac = segmentSquared<Ops>(p, f.a, f.c, f.ac, f.d2, f.lac, f.ac);
     V best = s_ab;
     best = Ops::select(Ops::lt(s_bc, best), s_bc, best);
     best = Ops::select(Ops::lt(s_ac, best), s_ac, best);
-    squared = Ops::select(degenerate, best, squared);
+    if (Ops::any(sliver)) {  // the projection when it lies in the sliver, else its boundary
+      const Projection<V> pr = projectOnPlane(p, f);
+      const M inside = Ops::andM(Ops::ge(pr.wa, zero), Ops::andM(Ops::ge(pr.wb, zero), Ops::ge(pr.wc, zero)));
+      const V s = pr.wa + pr.wb + pr.wc;
+      const V3<V> q = pointAt(f.a, pr.wb / s, f.ab, pr.wc / s, f.ac);
+      best = Ops::select(Ops::andM(sliver, inside), squaredDistance(p, q), best);
+    }
+    squared = Ops::select(Ops::orM(degenerate, sliver), best, squared);
   }
   Ops::store(out + lane, squared);
 }
