@@ -399,6 +399,22 @@ TEST_CASE("identical meshes: zero") {
   }
 }
 
+TEST_CASE("a triangle lying inside a sliver: zero, within the tolerance") {
+  // B is a sliver (largest angle 179.9993 degrees); A lies in it, in its plane: h(A, B) = 0.
+  // The sliver's distances were once 7.6e-7 off, which put the certified lower bound above 0.
+  Mesh sliver, inside;
+  sliver.positions = {Vec3(0, 0, 0), Vec3(1, 0, 0), Vec3(0.5, 3e-6, 0)};
+  sliver.triangles = {Triangle{0, 1, 2}};
+  inside.positions = {Vec3(0.1, 1e-7, 0), Vec3(0.98, 1.6e-8, 0), Vec3(0.5, 2.9e-6, 0)};
+  inside.triangles = {Triangle{0, 1, 2}};
+  HausdorffOptions options;
+  options.tolerance = 1e-9;
+  const HausdorffResult r = hausdorffOneSided(inside, sliver, options);
+  CHECK(r.lower <= 1e-15);
+  CHECK(r.upper >= 0);
+  CHECK(r.upper - r.lower <= options.tolerance);
+}
+
 TEST_CASE("a square translated along its normal: the translation both ways") {
   const Mesh square = scenes::gridPlane(6, 2.0);
   const double t = 0.37;
