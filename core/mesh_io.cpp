@@ -709,7 +709,10 @@ std::string checkPlyValue(std::string_view word, const PlyType& type, std::int64
   }
   double value;
   switch (parseDouble(word, value)) {
-    case NumberStatus::kOk: return {};
+    case NumberStatus::kOk:
+      if (type.bytes == 4 && std::abs(value) > std::numeric_limits<float>::max())
+        return shown(word) + " is too large for a float";
+      return {};
     case NumberStatus::kNonFinite: return shown(word) + " is not finite";
     case NumberStatus::kNotANumber: break;
   }
@@ -797,6 +800,23 @@ void checkStl(const std::string& path, std::istream& in, std::uint64_t file_size
     in.read(tail.data(), static_cast<std::streamsize>(tail.size()));
     if (tail.find("endsolid") == std::string::npos)
       fail(path, "the ASCII STL has no 'endsolid' at its end (truncated file)");
+    // Vertex lines: three finite numbers each (CGAL only says the file is malformed).
+    in.clear();
+    in.seekg(0);
+    std::string line;
+    std::uint64_t line_number = 0;
+    while (std::getline(in, line)) {
+      ++line_number;
+      const auto words = splitWords(line);
+      if (words.empty() || words[0] != "vertex") continue;
+      const std::string at = "line " + std::to_string(line_number) + ": ";
+      if (words.size() < 4) fail(path, at + "a vertex needs 3 coordinates");
+      for (std::size_t k = 1; k <= 3; ++k) {
+        double value;
+        if (parseDouble(words[k], value) != NumberStatus::kOk)
+          fail(path, at + "vertex coordinate " + shown(words[k]) + " is not a finite number");
+      }
+    }
     return;
   }
   if (got < kHeaderBytes)

@@ -358,6 +358,17 @@ TEST_CASE("readMesh refuses garbage in every format", "[mesh_io]") {
                                             "vertex 0 0 0\nvertex 1 0 0\nendloop\nendfacet\n"
                                             "endsolid x\n")),
              Contains("malformed ASCII STL"));
+  for (const char* bad : {"nan", "inf", "1e400", "x"}) {
+    CHECK_THAT(readError(dir.write("nan.stl", std::string("solid x\nfacet normal 0 0 1\nouter loop\n"
+                                                          "vertex 0 0 0\nvertex ") + bad +
+                                                  " 0 0\nvertex 0 1 0\nendloop\nendfacet\nendsolid x\n")),
+               Contains("line 5: vertex coordinate '" + std::string(bad) + "' is not a finite number"));
+  }
+  CHECK_THAT(readError(dir.write("big.ply", "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\n"
+                                            "property float y\nproperty float z\nelement face 1\n"
+                                            "property list uchar int vertex_indices\nend_header\n"
+                                            "0 0 0\n1e39 0 0\n0 1 0\n3 0 1 2\n")),
+             Contains("'1e39' is too large for a float"));
   // Binary OFF: CGAL 5.5's soup reader misreads it, so it is refused outright.
   std::string binary_off = "OFF BINARY\n";
   for (std::uint32_t v : {3u, 1u, 0u}) putU32(binary_off, v, true);
