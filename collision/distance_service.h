@@ -8,7 +8,7 @@
 //    closedness, rest pseudonormals), one per mesh whatever the number of bodies using it;
 //  - per body, per step: pose, key-frame time or deformed positions with their bounds
 //    (deform/), and the body's world box, recomputed once per step when it changed;
-//  - per (point, body) pair: a CoherentState (core/sweep_query.h, ~200 bytes) carried from one
+//  - per (point, body) pair: a CoherentState (core/sweep_query.h, 336 bytes) carried from one
 //    step to the next, plus one QueryStream per thread and body that lends scratch memory.
 //
 // Coherent-state policy: a step keeps exactly the states of the (point, body) pairs it queried
@@ -16,7 +16,8 @@
 // inflated by the query distance) is dropped, and starts cold if it comes back. Memory is
 // therefore bounded by the pairs of the last step. Steps in within mode neither use nor change
 // the states. A state is tied to the body's handle: removing a body drops its states (a new
-// body in the same slot has a new generation and starts cold).
+// body in the same slot has a new generation and starts cold); remove() frees their memory at
+// once.
 //
 // Threads: step() splits the points into fixed blocks of ServiceOptions::block_size points and
 // runs them with tbb::parallel_for in the service's own tbb::task_arena (setThreads()). Each
