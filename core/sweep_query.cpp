@@ -945,6 +945,7 @@ void QueryStream::frontRefine(const Vec3& p, const float q[3], bool far, double&
   popped_.clear();
   float dist[8];
   double lower = 0;
+  front_tie_ = true;  // unless a face at the top proves otherwise
   while (!front_.empty()) {
     lower = std::min(front_.front().key - drift_, upper);
     if (stop_at_tolerance && upper - lower <= tolerance) break;
@@ -962,9 +963,12 @@ void QueryStream::frontRefine(const Vec3& p, const float q[3], bool far, double&
     if (e.lane < 8) {  // a fresh face at the top: the closest remaining face
       if (stop_at_tolerance) {
         // Exact: the answer is this face's distance, which key - drift_ can miss by an ulp;
-        // an infinite lower bound lets upperAnswer take that distance for both bounds.
+        // an infinite lower bound lets upperAnswer take that distance for both bounds. Another
+        // face can tie with it only if the next entry's bound reaches its distance (keys carry
+        // the drift's rounding: a relative margin covers it).
         upper = e.key - drift_;
         lower = kInf;
+        front_tie_ = !front_.empty() && front_.front().key <= e.key + 1e-12 * (std::abs(e.key) + std::abs(drift_));
         upper_face = static_cast<TriangleIndex>(e.ref);
         upper_vertex = kInvalidIndex;
         frontPush(e);
@@ -1040,7 +1044,7 @@ ClosestPoint QueryStream::closestWithinCoherent(const Vec3& p, double tolerance)
   if (upper_face != kInvalidIndex) hit = hitOn(upper_face, p);
   ClosestPoint out = upperAnswer(h, g.positions, upper_face != kInvalidIndex ? &hit : nullptr,
                                  upper_vertex, upper, lower_);
-  if (tolerance <= 0) canonicalExact(p, out);
+  if (tolerance <= 0 && front_tie_) canonicalExact(p, out);
   out.counters = counters_;
   return out;
 }

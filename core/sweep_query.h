@@ -249,6 +249,7 @@ class QueryStream {
   double drift_ = 0;
   double front_distance_ = 0;
   double lower_ = 0;  // the front's lower bound after the last refinement
+  bool front_tie_ = true;  // the last refinement's answer may tie with another face
 };
 
 }  // namespace meshsweeper
