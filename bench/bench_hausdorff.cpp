@@ -22,7 +22,7 @@
 // After the report: a markdown summary table, and a check that Meshsweeper's [lower, upper]
 // contains every CGAL bounded value within the tolerance (a WARNING line if not).
 //
-// Own flags: --quick (mannequin only, tolerance 1e-3), --pairs=a,b (armadillo,bunny00,mannequin)
+// Own flags: --quick (mannequin only, tolerance 1e-3), --pairs=a,b (armadillo,bunny,mannequin)
 // --tolerances=1e-3,1e-4 (relative), --cgal-limit=S (default 20: once a CGAL bounded case took
 // more than S seconds in one run on a pair, that pair's CGAL cases at 1e-5 are skipped, and a
 // case that took more than S is not repeated), --data-dir=PATH. Exit code 77 when a mesh is

@@ -24,7 +24,7 @@ const char kSceneHelp[] =
     "  hausdorff  armadillo coloured by its distance to an 8k-triangle simplification of it\n"
     "             (front and back), certified Hausdorff bounds\n"
     "  particle   a particle falling onto a torus (paper Fig. 6): four frames with the closest\n"
-    "             point and the faces within 1.2 times the distance\n"
+    "             point and the dynamic front that found it\n"
     "  cloth      cloth points draped over a key-framed body through the distance service,\n"
     "             per-step query timings\n"
     "  all        the three in turn\n"
