@@ -697,15 +697,18 @@ std::vector<PositionsUpdate> DistanceService::setPositions(const std::vector<Bod
                                 " appears twice in the batch");
   std::vector<PositionsUpdate> updates(batch.size());
   impl_->arena->execute([&] {
-    // Coordinates first (read-only), so an error leaves every body unchanged.
-    std::vector<uint8_t> finite(batch.size(), 1);
+    // Coordinates and extent first (read-only), so an error leaves every body unchanged.
+    std::vector<uint8_t> finite(batch.size(), 1), fits(batch.size(), 1);
     tbb::parallel_for(size_t{0}, batch.size(), [&](size_t i) {
       bool ok = true;
       for (const Vec3& x : *batch[i].positions) ok &= inCoordinateRange(x);
       finite[i] = ok;
+      fits[i] = ok && positionsDiagonal(*batch[i].positions) <= kMaxMeshSize;
     });
-    for (size_t i = 0; i < batch.size(); ++i)
+    for (size_t i = 0; i < batch.size(); ++i) {
       if (!finite[i]) throw error(i, " has a non-finite position or one beyond 1e150 in magnitude");
+      if (!fits[i]) throw error(i, " has positions spanning more than the supported mesh size 1e50");
+    }
     tbb::parallel_for(size_t{0}, batch.size(),
                       [&](size_t i) { updates[i] = impl_->applyPositions(*targets[i], *batch[i].positions); });
   });

@@ -51,6 +51,16 @@ void meshBounds(const Mesh& mesh, Vec3& lower, Vec3& upper) {
   }
 }
 
+double positionsDiagonal(const std::vector<Vec3>& positions) {
+  if (positions.empty()) return 0;
+  Vec3 lower = positions[0], upper = positions[0];
+  for (const Vec3& x : positions) {
+    lower = lower.cwiseMin(x);
+    upper = upper.cwiseMax(x);
+  }
+  return (upper - lower).norm();
+}
+
 double meshDiagonal(const Mesh& mesh) {
   Vec3 lower, upper;
   meshBounds(mesh, lower, upper);

@@ -679,9 +679,21 @@ void walkBinaryPly(const std::string& path, std::istream& in, const PlyHeader& h
     }
     in.seekg(static_cast<std::streamoff>(position));
   }
-  if (position < file_size)
-    fail(path, std::to_string(file_size - position) + " bytes follow the last element the header declares "
-               "(wrong counts or extra data)");
+  if (position < file_size) {
+    // A few blank bytes (a final newline) are tolerated; anything else is refused.
+    constexpr std::uint64_t kBlankTail = 16;
+    bool blank = file_size - position <= kBlankTail;
+    if (blank) {
+      char tail[kBlankTail];
+      in.clear();
+      in.seekg(static_cast<std::streamoff>(position));
+      in.read(tail, static_cast<std::streamsize>(file_size - position));
+      for (std::streamsize k = 0; k < in.gcount(); ++k) blank &= std::isspace(static_cast<unsigned char>(tail[k])) != 0;
+    }
+    if (!blank)
+      fail(path, std::to_string(file_size - position) + " bytes follow the last element the header declares "
+                 "(wrong counts or extra data)");
+  }
 }
 
 // Reads the next whitespace-separated word of an ASCII PLY body; false at the end.
@@ -710,7 +722,7 @@ std::string checkPlyValue(std::string_view word, const PlyType& type, std::int64
   double value;
   switch (parseDouble(word, value)) {
     case NumberStatus::kOk:
-      if (type.bytes == 4 && std::abs(value) > std::numeric_limits<float>::max())
+      if (type.bytes == 4 && std::isinf(static_cast<float>(value)))
         return shown(word) + " is too large for a float";
       return {};
     case NumberStatus::kNonFinite: return shown(word) + " is not finite";

@@ -786,8 +786,8 @@ void QueryStream::canonicalExact(const Vec3& p, ClosestPoint& out) {
   if (out.triangle == kInvalidIndex) return;
   TriangleIndex face = out.triangle;
   depthFirst(p, squaredDistanceToFace(face, p), 0, face);
-  if (face == out.triangle && out.distance == out.upper && out.lower == out.upper) return;
-  fillFromHit(out, hitOn(face, p));
+  fillFromHit(out, hitOn(face, p));  // also when the face is the same: a vertex answer's
+                                     // distance can differ from the face's by an ulp
 }
 
 void QueryStream::kClosest(const Vec3& p, size_t k, std::vector<TriangleHit>& out) {

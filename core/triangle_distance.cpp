@@ -246,7 +246,9 @@ inline double closestImpl(const Vec3& pe, const Vec3& ae, const Vec3& be, const 
   const bool sliver = !degenerate && isSliver(f.det, f.lab, f.lac);
   Projection<double> proj{};
   if (sliver) proj = projectOnPlane(p, f);
-  const bool sliver_face = sliver && proj.wa >= 0.0 && proj.wb >= 0.0 && proj.wc >= 0.0;
+  // (Edge functions of a sliver with edges near 1e-80 underflow to 0: not inside then.)
+  const bool sliver_face = sliver && proj.wa >= 0.0 && proj.wb >= 0.0 && proj.wc >= 0.0 &&
+                           proj.wa + proj.wb + proj.wc > 0.0;
   if (sliver_face) {
     // The projection lies in the sliver: the closest point, from its barycentric coordinates.
     const double s = proj.wa + proj.wb + proj.wc;  // > 0: a positive sum of three >= 0 terms
@@ -524,7 +526,7 @@ inline void blockLanes(const V3<typename Ops::V>& p, const TriangleBlock8& block
       const M inside = Ops::andM(Ops::ge(pr.wa, zero), Ops::andM(Ops::ge(pr.wb, zero), Ops::ge(pr.wc, zero)));
       const V s = pr.wa + pr.wb + pr.wc;
       const V3<V> q = pointAt(f.a, pr.wb / s, f.ab, pr.wc / s, f.ac);
-      best = Ops::select(Ops::andM(sliver, inside), squaredDistance(p, q), best);
+      best = Ops::select(Ops::andM(Ops::andM(sliver, inside), Ops::gt(s, zero)), squaredDistance(p, q), best);
     }
     squared = Ops::select(Ops::orM(degenerate, sliver), best, squared);
   }

@@ -72,6 +72,15 @@ void DeformingBody::refreshInlineFaces() {
   refreshLeafBlocks(*hierarchy_, positions_.data(), extent_bound_, leaf_blocks_, nodes_);
 }
 
+// Positions whose bounding-box diagonal exceeds the supported mesh size (core/mesh.h) would
+// overflow the exact distance: refused like a mesh of that size.
+void DeformingBody::checkExtent(const std::vector<Vec3>& positions, const char* what) const {
+  const double diagonal = positionsDiagonal(positions);
+  if (diagonal > kMaxMeshSize)
+    throw std::invalid_argument(std::string("DeformingBody: the ") + what + " span " + std::to_string(diagonal) +
+                                " (bounding-box diagonal), beyond the supported mesh size 1e50");
+}
+
 void DeformingBody::checkSize(size_t count, const char* what) const {
   if (count != positions_.size())
     throw std::invalid_argument(std::string("DeformingBody: ") + what + " has " + std::to_string(count) +
@@ -84,6 +93,7 @@ void DeformingBody::anchor(const std::vector<Vec3>& positions) {
     if (!inCoordinateRange(positions[v]))
       throw std::invalid_argument("DeformingBody: anchor position " + std::to_string(v) +
                                   " is not finite or beyond 1e150 in magnitude");
+  checkExtent(positions, "anchor positions");
   anchor_positions_ = positions;
   positions_ = positions;
   anchor_nodes_ = hierarchy_->nodes();
@@ -191,6 +201,7 @@ DisplacementCheck DeformingBody::setPositions(const std::vector<Vec3>& positions
     }
   }
   if (!check.accepted) return check;
+  checkExtent(positions, "positions");
   positions_ = positions;
   refreshInlineFaces();
   geometry_.version = nextGeometryVersion();

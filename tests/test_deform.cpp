@@ -663,6 +663,8 @@ TEST_CASE("key frames: bad frames throw", "[deform][keyframe]") {
   std::vector<Vec3> huge_frame = mesh.positions;
   huge_frame[1].x() = 1e151;
   CHECK_THROWS_WITH(KeyframeBody(h, Frames{mesh.positions, huge_frame}), Catch::Contains("beyond 1e150"));
+  huge_frame[1].x() = 1e60;
+  CHECK_THROWS_WITH(KeyframeBody(h, Frames{mesh.positions, huge_frame}), Catch::Contains("supported mesh size"));
   CHECK_NOTHROW((KeyframeBody(h, Frames{mesh.positions, mesh.positions})));
 }
 
@@ -710,6 +712,16 @@ TEST_CASE("inflated bounds: bad input throws and changes nothing", "[deform][inf
   huge_positions[2].y() = -1e155;  // finite, but squared distances would overflow
   CHECK_THROWS_WITH(body.setPositions(huge_positions), Catch::Contains("position 2") && Catch::Contains("beyond 1e150"));
   CHECK_THROWS_WITH(body.anchor(huge_positions), Catch::Contains("beyond 1e150"));
+  // Finite coordinates spanning more than the supported mesh size (1e50): refused too.
+  std::vector<Vec3> wide_positions = moved;
+  wide_positions[2].y() = 1e60;
+  CHECK_FALSE(body.setPositions(wide_positions).accepted);  // past its displacement bound
+  CHECK_THROWS_WITH(body.anchor(wide_positions), Catch::Contains("supported mesh size"));
+  {
+    DeformingBody loose(h);
+    loose.inflate(1e61);  // within its bound now: the extent itself is refused
+    CHECK_THROWS_WITH(loose.setPositions(wide_positions), Catch::Contains("supported mesh size"));
+  }
   CHECK_THROWS_AS(body.anchor(std::vector<Vec3>(n + 1, Vec3::Zero())), std::invalid_argument);
   CHECK_THROWS_AS(body.anchor(nan_positions), std::invalid_argument);
   // Nothing changed: the accepted positions, valid bounds, exact queries.

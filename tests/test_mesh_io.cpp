@@ -369,6 +369,12 @@ TEST_CASE("readMesh refuses garbage in every format", "[mesh_io]") {
                                             "property list uchar int vertex_indices\nend_header\n"
                                             "0 0 0\n1e39 0 0\n0 1 0\n3 0 1 2\n")),
              Contains("'1e39' is too large for a float"));
+  // FLT_MAX as printed for a round trip (3.40282347e+38, above FLT_MAX as a double) is a float.
+  CHECK(meshsweeper::readMesh(dir.write("max.ply", "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\n"
+                                                   "property float y\nproperty float z\nproperty float quality\n"
+                                                   "element face 1\nproperty list uchar int vertex_indices\n"
+                                                   "end_header\n0 0 0 3.40282347e+38\n1 0 0 0\n0 1 0 0\n3 0 1 2\n"))
+            .triangles.size() == 1);
   // Binary OFF: CGAL 5.5's soup reader misreads it, so it is refused outright.
   std::string binary_off = "OFF BINARY\n";
   for (std::uint32_t v : {3u, 1u, 0u}) putU32(binary_off, v, true);
@@ -595,6 +601,7 @@ TEST_CASE("readMesh refuses out-of-range indices and faces with fewer than 3 cor
   putU8(binary, 3);
   for (std::uint32_t v : {0u, 1u, 2u}) putU32(binary, v);
   CHECK(meshsweeper::readMesh(dir.write("fine_binary.ply", binary)).triangles.size() == 1);
+  CHECK(meshsweeper::readMesh(dir.write("newline_binary.ply", binary + "\n")).triangles.size() == 1);
   putU32(binary, 7);
   CHECK_THAT(readError(dir.write("extra_binary.ply", binary)),
              Contains("4 bytes follow the last element the header declares"));

@@ -552,3 +552,27 @@ TEST_CASE("block of eight: hand-made lanes", "[triangle_distance]") {
     }
   }
 }
+
+TEST_CASE("closest point: tiny slivers stay finite and exact", "[triangle_distance]") {
+  // Slivers with edges near 1e-80 (a mesh of size 1 may hold one): their edge functions
+  // underflow to 0, which once made the projection 0/0. Scalar and block must agree with the
+  // reference.
+  std::mt19937_64 rng(77);
+  std::uniform_real_distribution<double> u(0, 1);
+  for (int i = 0; i < 2000; ++i) {
+    const double scale = std::pow(10.0, -78 - 4 * u(rng));
+    const double x = u(rng);
+    const Vec3 a(0, 0, 0), b(scale, 0, 0), c(x * scale, 1e-4 * scale * std::min(x, 1 - x), 0);
+    const Vec3 p = Vec3(u(rng) - 0.5, u(rng) - 0.5, u(rng) - 0.5) * 2 * scale;
+    const TriangleClosest r = closestPointOnTriangle(p, a, b, c);
+    INFO(describe(p, a, b, c));
+    REQUIRE(std::isfinite(r.squared_distance));
+    const double reference = referenceSquared(p, a, b, c);
+    CHECK(std::abs(r.squared_distance - reference) <= 1e-12 * reference + 1e-300);
+    TriangleBlock8 block;
+    for (int lane = 0; lane < 8; ++lane) setLane(block, lane, a, b, c);
+    double out[8];
+    squaredDistancesToBlock(p, block, out);
+    CHECK(out[0] == squaredDistanceToTriangle(p, a, b, c));
+  }
+}
