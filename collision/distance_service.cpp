@@ -469,16 +469,13 @@ struct DistanceService::Impl {
     stats.states = states.pairs.size();
   }
 
-  // The hits [first, last) of one point on one body: on a closed body they all take the sign
-  // of the closest (the lowest triangle at equal distance), where the pseudonormal test holds;
-  // a farther face's own feature says nothing about inside and outside.
+  // The hits [first, last) of one point on one body, in QueryStream::within's order (by
+  // distance, ties by triangle): on a closed body they all take the sign of the first, the
+  // closest, where the pseudonormal test holds; a farther face's own feature says nothing about
+  // inside and outside.
   static void signLikeClosest(DistanceHit* first, DistanceHit* last) {
     if (first == last || !first->closed_body) return;
-    const DistanceHit* closest = first;
-    for (const DistanceHit* h = first + 1; h != last; ++h)
-      if (h->distance < closest->distance || (h->distance == closest->distance && h->triangle < closest->triangle))
-        closest = h;
-    const HitSign sign = closest->sign;
+    const HitSign sign = first->sign;
     for (DistanceHit* h = first; h != last; ++h) {
       h->sign = sign;
       h->signed_distance = sign == HitSign::kInside ? -h->distance : h->distance;

@@ -92,9 +92,7 @@ std::vector<Vec3> bandPoints(const Mesh& mesh, size_t n, double max_offset, uint
   std::vector<double> cumulative(mesh.triangles.size());
   double total = 0;
   for (size_t t = 0; t < mesh.triangles.size(); ++t) {
-    const Triangle& tri = mesh.triangles[t];
-    const Vec3& a = mesh.positions[tri[0]];
-    total += 0.5 * (mesh.positions[tri[1]] - a).cross(mesh.positions[tri[2]] - a).norm();
+    total += triangleArea(mesh, t);
     cumulative[t] = total;
   }
   std::mt19937_64 engine(seed);
@@ -134,12 +132,7 @@ double checkVoxel(const Mesh& mesh, const VdbCheckOptions& options) {
   if (!(voxel > 0) || !std::isfinite(voxel))
     throw MeshError(mesh.name + ": the mesh has no extent (its vertices coincide), so no voxel size follows "
                                 "from it; give one");
-  double area = 0;
-  for (const Triangle& t : mesh.triangles) {
-    const Vec3& a = mesh.positions[t[0]];
-    area += 0.5 * (mesh.positions[t[1]] - a).cross(mesh.positions[t[2]] - a).norm();
-  }
-  const double voxels = (area / (voxel * voxel) + 1) * 2 * std::max(options.half_width, 1.0);
+  const double voxels = (surfaceArea(mesh) / (voxel * voxel) + 1) * 2 * std::max(options.half_width, 1.0);
   if (voxels > 2e8) {
     std::ostringstream out;
     out << mesh.name << ": a voxel of " << voxel << " would need about " << voxels

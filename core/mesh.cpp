@@ -51,6 +51,18 @@ void meshBounds(const Mesh& mesh, Vec3& lower, Vec3& upper) {
   }
 }
 
+double triangleArea(const Mesh& mesh, size_t t) {
+  const Triangle& f = mesh.triangles[t];
+  const Vec3& a = mesh.positions[f[0]];
+  return 0.5 * (mesh.positions[f[1]] - a).cross(mesh.positions[f[2]] - a).norm();
+}
+
+double surfaceArea(const Mesh& mesh) {
+  double area = 0;
+  for (size_t t = 0; t < mesh.triangles.size(); ++t) area += triangleArea(mesh, t);
+  return area;
+}
+
 double positionsDiagonal(const std::vector<Vec3>& positions) {
   if (positions.empty()) return 0;
   Vec3 lower = positions[0], upper = positions[0];

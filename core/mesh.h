@@ -34,6 +34,10 @@ inline constexpr double kMinMeshSize = 1e-50;
 // Returns an empty string when the mesh is usable, else "NAME: problem".
 std::string checkMesh(const Mesh& mesh);
 
+// Area of triangle t (0 for a degenerate one), and of all triangles.
+double triangleArea(const Mesh& mesh, size_t t);
+double surfaceArea(const Mesh& mesh);
+
 // The bounding-box diagonal of all `positions` (moved vertices: deform/ refuses positions whose
 // diagonal exceeds kMaxMeshSize, as checkMesh refuses such meshes). 0 for none.
 double positionsDiagonal(const std::vector<Vec3>& positions);

@@ -1054,8 +1054,11 @@ void QueryStream::kClosestCoherent(const Vec3& p, size_t k, std::vector<Triangle
   out.clear();
   counters_ = {};
   ++coherence_.steps;
-  if (!inCoordinateRange(p, kMaxQueryCoordinate)) has_front_ = false;  // the front restarts at the next point
-  if (k == 0 || !inCoordinateRange(p, kMaxQueryCoordinate)) return;
+  if (!inCoordinateRange(p, kMaxQueryCoordinate)) {
+    has_front_ = false;  // the front restarts at the next point
+    return;
+  }
+  if (k == 0) return;
   const ScaledPoint sp = scalePoint(g, p);
   frontMove(p);
   double upper = kInf;

@@ -72,10 +72,9 @@ void DeformingBody::refreshInlineFaces() {
   refreshLeafBlocks(*hierarchy_, positions_.data(), extent_bound_, leaf_blocks_, nodes_);
 }
 
-// Positions whose bounding-box diagonal exceeds the supported mesh size (core/mesh.h) would
+// Positions whose bounding-box diagonal (`diagonal`) exceeds the supported mesh size (core/mesh.h) would
 // overflow the exact distance: refused like a mesh of that size.
-void DeformingBody::checkExtent(const std::vector<Vec3>& positions, const char* what) const {
-  const double diagonal = positionsDiagonal(positions);
+void DeformingBody::checkExtent(double diagonal, const char* what) const {
   if (diagonal > kMaxMeshSize)
     throw std::invalid_argument(std::string("DeformingBody: the ") + what + " span " + std::to_string(diagonal) +
                                 " (bounding-box diagonal), beyond the supported mesh size 1e50");
@@ -93,7 +92,7 @@ void DeformingBody::anchor(const std::vector<Vec3>& positions) {
     if (!inCoordinateRange(positions[v]))
       throw std::invalid_argument("DeformingBody: anchor position " + std::to_string(v) +
                                   " is not finite or beyond 1e150 in magnitude");
-  checkExtent(positions, "anchor positions");
+  checkExtent(positionsDiagonal(positions), "anchor positions");
   anchor_positions_ = positions;
   positions_ = positions;
   anchor_nodes_ = hierarchy_->nodes();
@@ -178,14 +177,18 @@ DisplacementCheck DeformingBody::setPositions(const std::vector<Vec3>& positions
   // kMaxCoordinate, vertices that may be past their bound (a superset: squared, with a relative
   // 1e-12 to spare), and how far the farthest vertex moves (the lineage's drift grows by that).
   // NaN fails every comparison, so it is caught by `finite`.
+  // The same pass takes the positions' box, for the extent check.
   bool finite = true, suspect = false;
   double moved2 = 0;
+  Vec3 lower = Vec3::Constant(std::numeric_limits<double>::infinity()), upper = -lower;
   for (size_t v = 0; v < positions.size(); ++v) {
     const Vec3 d = positions[v] - anchor_positions_[v];
     const double d2 = d.squaredNorm();
     finite &= inCoordinateRange(positions[v]);
     suspect |= d2 > delta_[v] * delta_[v] * (1 - 1e-12);
     moved2 = std::max(moved2, (positions[v] - positions_[v]).squaredNorm());
+    lower = lower.cwiseMin(positions[v]);
+    upper = upper.cwiseMax(positions[v]);
   }
   if (!finite || suspect) {
     for (size_t v = 0; v < positions.size(); ++v) {
@@ -201,7 +204,7 @@ DisplacementCheck DeformingBody::setPositions(const std::vector<Vec3>& positions
     }
   }
   if (!check.accepted) return check;
-  checkExtent(positions, "positions");
+  checkExtent((upper - lower).norm(), "positions");
   positions_ = positions;
   refreshInlineFaces();
   geometry_.version = nextGeometryVersion();

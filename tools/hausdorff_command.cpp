@@ -55,15 +55,6 @@ namespace {
 
 double percent(double value, double diagonal) { return diagonal > 0 ? 100 * value / diagonal : 0; }
 
-double surfaceArea(const Mesh& mesh) {
-  double area = 0;
-  for (const Triangle& t : mesh.triangles) {
-    const Vec3& a = mesh.positions[t[0]];
-    area += 0.5 * (mesh.positions[t[1]] - a).cross(mesh.positions[t[2]] - a).norm();
-  }
-  return area;
-}
-
 // x with 7 significant digits, rounded down (up = false) or up, so that a printed certified
 // interval still contains the value.
 std::string bound7(double x, bool up) {
