@@ -320,10 +320,14 @@ struct DistanceService::Impl {
     hit.barycentric = barycentric;
     hit.distance = distance;
     hit.closed_body = shape.closed();
-    const Vec3 normal = b.kind == BodyKind::kRigid ? shape.restPseudonormal(face, feature)
-                                                   : shape.pseudonormal(face, feature, b.positions());
     const Vec3 offset = q - c;
     const double length = offset.norm();
+    // The pseudonormal gives a closed body's sign, and the direction at distance 0; an open
+    // moving body skips it otherwise (evaluated at the current positions, it is not free).
+    Vec3 normal = Vec3::Zero();
+    if (hit.closed_body || !(length > 0))
+      normal = b.kind == BodyKind::kRigid ? shape.restPseudonormal(face, feature)
+                                          : shape.pseudonormal(face, feature, b.positions());
     Vec3 direction = Vec3::Zero();
     if (length > 0) {
       direction = offset / length;

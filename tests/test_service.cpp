@@ -488,6 +488,23 @@ TEST_CASE("open meshes answer unsigned; distance 0 uses the feature's pseudonorm
   CHECK(inside->sign == HitSign::kInside);
   CHECK(inside->signed_distance == -inside->distance);
   CHECK(inside->distance == Approx(0.8).margin(0.05));
+
+  // An open deforming body: unsigned, and at distance 0 the direction is still the feature's
+  // pseudonormal at the current positions (the plane lifted by 0.5).
+  DistanceService moving;
+  const BodyHandle d_plane = moving.addDeforming(moving.hierarchyFor(plane), 1.0);
+  std::vector<Vec3> lifted = plane.positions;
+  for (Vec3& x : lifted) x.z() += 0.5;
+  moving.setPositions(d_plane, lifted);
+  const std::vector<Vec3> near = {Vec3(0.1, 0.2, 0.2), Vec3(0.0, 0.0, 0.5)};
+  const StepResult m = moving.step(toMatrix(near), 10.0, QueryMode::kClosest);
+  REQUIRE(m.closest(0));
+  REQUIRE(m.closest(1));
+  CHECK(m.closest(0)->sign == HitSign::kUnsigned);
+  CHECK(m.closest(0)->direction.isApprox(Vec3(0, 0, -1), 1e-12));
+  CHECK(m.closest(1)->distance == 0);
+  CHECK(m.closest(1)->sign == HitSign::kUnsigned);
+  CHECK(m.closest(1)->direction.isApprox(Vec3(0, 0, 1), 1e-12));
 }
 
 TEST_CASE("pseudonormals on demand equal the precomputed rest tables", "[service][sign]") {
