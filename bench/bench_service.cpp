@@ -11,7 +11,10 @@
 //   deforming: each body's vertices move along a travelling wave of amplitude 0.003 about the
 //              rest positions (setPositions, all bodies in one batch; displacement bound 0.0037,
 //              which the wave never exceeds: the bounds are inflated once and never re-anchored).
-// Query: the closest hit within 0.02 of every point (QueryMode::kClosest).
+// Query: the closest hit within 0.02 of every point (QueryMode::kClosest); with --within=D every
+// triangle within D of every point (QueryMode::kWithin; Embree: rtcPointQuery with radius D,
+// the callback keeping every triangle within D with its closest point's barycentric
+// coordinates, as the service returns them).
 //
 // Methods, both exact and fed by the same broadphase (collision/broadphase.h, body boxes from
 // DistanceService::worldBox):
@@ -34,7 +37,7 @@
 //
 // Flags: --quick (10k points, 1 and 4 bodies, 20 steps), --points=a,b  --bodies=a,b
 // --kinds=rigid,deforming  --threads=1,2  --steps=N  --methods=meshsweeper,embree
-// --reach=R (ServiceOptions::reach_steps)  --lead=L (ServiceOptions::lead_steps)  --data-dir=PATH  --broadphase. Exit code 77 when a mesh is missing.
+// --reach=R (ServiceOptions::reach_steps)  --lead=L (ServiceOptions::lead_steps)  --within=D  --data-dir=PATH  --broadphase. Exit code 77 when a mesh is missing.
 #include "bench/bench_util.h"
 #include "collision/broadphase.h"
 #include "collision/distance_service.h"
@@ -100,6 +103,7 @@ struct Options {
   float lead_steps = ServiceOptions{}.lead_steps;
   std::string data_dir;
   bool broadphase = false;
+  double within = 0;  // > 0: QueryMode::kWithin with this distance (--within=D)
 };
 
 std::vector<size_t> parseCounts(const std::string& flag, const std::string& value) {
@@ -150,6 +154,9 @@ Options parseOptions(int argc, char** argv) {
       o.data_dir = value;
     } else if (flag == "--broadphase") {
       o.broadphase = true;
+    } else if (flag == "--within") {
+      o.within = std::strtod(value.c_str(), nullptr);
+      if (!(o.within > 0) || !std::isfinite(o.within)) usageError("--within needs a positive distance");
     } else {
       usageError("unknown flag '" + arg + "'");
     }
@@ -206,6 +213,44 @@ inline double ericsonSquaredDistance(const Vec3& p, const Vec3& a, const Vec3& b
   return (ap - (vb * inv) * ab - (vc * inv) * ac).squaredNorm();
 }
 
+// The same, with the closest point's barycentric coordinates (v, w on ab, ac: point a + v ab + w ac),
+// as a within-mode user needs them for every hit.
+inline double ericsonClosest(const Vec3& p, const Vec3& a, const Vec3& b, const Vec3& c, double& v, double& w) {
+  const Vec3 ab = b - a, ac = c - a, ap = p - a;
+  const double d1 = ab.dot(ap), d2 = ac.dot(ap);
+  v = w = 0;
+  if (d1 <= 0 && d2 <= 0) return ap.squaredNorm();
+  const Vec3 bp = p - b;
+  const double d3 = ab.dot(bp), d4 = ac.dot(bp);
+  v = 1;
+  if (d3 >= 0 && d4 <= d3) return bp.squaredNorm();
+  const double vc = d1 * d4 - d3 * d2;
+  if (vc <= 0 && d1 >= 0 && d3 <= 0) {
+    v = d1 / (d1 - d3);
+    return (ap - v * ab).squaredNorm();
+  }
+  const Vec3 cp = p - c;
+  const double d5 = ab.dot(cp), d6 = ac.dot(cp);
+  v = 0;
+  w = 1;
+  if (d6 >= 0 && d5 <= d6) return cp.squaredNorm();
+  const double vb = d5 * d2 - d1 * d6;
+  if (vb <= 0 && d2 >= 0 && d6 <= 0) {
+    w = d2 / (d2 - d6);
+    return (ap - w * ac).squaredNorm();
+  }
+  const double va = d3 * d6 - d5 * d4;
+  if (va <= 0 && d4 - d3 >= 0 && d5 - d6 >= 0) {
+    w = (d4 - d3) / ((d4 - d3) + (d5 - d6));
+    v = 1 - w;
+    return (bp - w * (c - b)).squaredNorm();
+  }
+  const double inv = 1.0 / (va + vb + vc);
+  v = vb * inv;
+  w = vc * inv;
+  return (ap - v * ab - w * ac).squaredNorm();
+}
+
 bool needsRobustKernel(const Vec3& a, const Vec3& b, const Vec3& c) {
   const double ab = (b - a).squaredNorm(), ac = (c - a).squaredNorm(), bc = (c - b).squaredNorm();
   const double twice_area_squared = (b - a).cross(c - a).squaredNorm();
@@ -237,6 +282,42 @@ bool embreeCallback(RTCPointQueryFunctionArguments* args) {
       return true;
     }
   }
+  return false;
+}
+
+struct EmbreeHit {
+  double distance;
+  TriangleIndex triangle;
+  double v, w;  // barycentric coordinates of the closest point on b and c
+};
+
+// Within mode: every triangle at exact distance <= d (the radius never shrinks), with its
+// closest point's barycentric coordinates (what the service returns with each hit).
+struct EmbreeWithin {
+  const std::vector<Triangle>* triangles;
+  const Vec3* positions;
+  const uint8_t* robust;
+  Vec3 p;
+  double d;
+  std::vector<EmbreeHit>* out;
+};
+
+bool embreeWithinCallback(RTCPointQueryFunctionArguments* args) {
+  auto* q = static_cast<EmbreeWithin*>(args->userPtr);
+  const TriangleIndex t = args->primID;
+  const Triangle& tri = (*q->triangles)[t];
+  const Vec3 &a = q->positions[tri[0]], &b = q->positions[tri[1]], &c = q->positions[tri[2]];
+  double sq, v = 0, w = 0;
+  if (q->robust[t]) {
+    const TriangleClosest closest = closestPointOnTriangle(q->p, a, b, c);
+    sq = closest.squared_distance;
+    v = closest.barycentric[1];
+    w = closest.barycentric[2];
+  } else {
+    sq = ericsonClosest(q->p, a, b, c, v, w);
+  }
+  const double distance = std::sqrt(sq);
+  if (distance <= q->d) q->out->push_back({distance, t, v, w});
   return false;
 }
 
@@ -310,6 +391,22 @@ class EmbreeScene {
     if (q.best_triangle == kInvalidIndex) return kInvalidIndex;
     distance = std::sqrt(q.best_squared);
     return q.best_triangle;
+  }
+
+  // Every triangle within d of p (exact distances), appended to out as (distance, triangle).
+  void within(const Vec3& p, double d, std::vector<EmbreeHit>& out) const {
+    EmbreeWithin q{triangles_, positions_.data(), robust_.data(), p, d, &out};
+    RTCPointQuery query;
+    query.x = static_cast<float>(p.x());
+    query.y = static_cast<float>(p.y());
+    query.z = static_cast<float>(p.z());
+    query.time = 0.f;
+    const Vec3 pf(query.x, query.y, query.z);
+    const double slack = vertex_error_ + (pf - p).norm() * (1.0 + 1e-12);
+    query.radius = roundUpToFloat((d + slack) * (1.0 + 1e-6));
+    RTCPointQueryContext context;
+    rtcInitPointQueryContext(&context);
+    rtcPointQuery(scene_, &query, &context, embreeWithinCallback, &q);
   }
 
  private:
@@ -440,6 +537,14 @@ void sheetAt(const Scene& s, int step, PointMatrix& out) {
 struct Answer {
   double distance = std::numeric_limits<double>::infinity();
   uint32_t body = kInvalidIndex;
+  uint32_t count = 0;  // hits (within mode: every triangle within the distance)
+};
+
+// The query of a run: the closest hit within kMaxDistance, or (within > 0) every triangle
+// within `within`.
+struct Query {
+  QueryMode mode = QueryMode::kClosest;
+  double distance = kMaxDistance;
 };
 
 struct RunResult {
@@ -453,7 +558,7 @@ struct RunResult {
 
 // Meshsweeper: the service.
 RunResult runMeshsweeper(const Scene& scene, const std::vector<std::shared_ptr<const Hierarchy>>& hierarchies,
-                         int steps, unsigned threads, float reach_steps, float lead_steps) {
+                         int steps, unsigned threads, float reach_steps, float lead_steps, const Query& query) {
   DistanceService service(ServiceOptions{threads, kBlock, reach_steps, lead_steps});
   std::vector<BodyHandle> handles;
   std::vector<std::vector<Vec3>> positions(scene.meshes.size());
@@ -487,18 +592,25 @@ RunResult runMeshsweeper(const Scene& scene, const std::vector<std::shared_ptr<c
     } else {
       for (size_t b = 0; b < handles.size(); ++b) service.setPose(handles[b], rigidPose(scene.origins[b], step));
     }
-    service.step(sheet, kMaxDistance, QueryMode::kClosest, out);
+    service.step(sheet, query.distance, query.mode, out);
     r.cpu.push_back(threadCpuSeconds() - cpu0);
     r.process_cpu.push_back(processCpuSeconds() - process0);
     r.wall.push_back(secondsSince(start));
     pairs += out.stats().pairs;
     certified += out.stats().certified_pairs;
-    hits += out.stats().hits;
+    for (size_t i = 0; i < out.size(); ++i) hits += !out.hits(i).empty();
     if (step == 0 || step == steps - 1) {
       std::vector<Answer>& answers = step == 0 ? r.first : r.last;
       answers.assign(out.size(), Answer{});
-      for (size_t i = 0; i < out.size(); ++i)
-        if (const DistanceHit* hit = out.closest(i)) answers[i] = {hit->distance, hit->body.index};
+      for (size_t i = 0; i < out.size(); ++i) {
+        if (query.mode == QueryMode::kClosest) {
+          if (const DistanceHit* hit = out.closest(i)) answers[i] = {hit->distance, hit->body.index, 1};
+        } else if (!out.hits(i).empty()) {
+          const StepResult::Hits h = out.hits(i);
+          const DistanceHit& first = h[0];  // the closest
+          answers[i] = {first.distance, first.body.index, static_cast<uint32_t>(h.last - h.first)};
+        }
+      }
     }
   }
   const double total = static_cast<double>(steps) * static_cast<double>(scene.rest_points.size());
@@ -509,7 +621,8 @@ RunResult runMeshsweeper(const Scene& scene, const std::vector<std::shared_ptr<c
 }
 
 // Embree: the same job, same broadphase, warm start per (point, body).
-RunResult runEmbree(const Scene& scene, const std::vector<Mesh>& meshes, int steps, unsigned threads) {
+RunResult runEmbree(const Scene& scene, const std::vector<Mesh>& meshes, int steps, unsigned threads,
+                    const Query& query) {
   const size_t bodies = scene.meshes.size();
   const size_t n = scene.rest_points.size();
   const EmbreeDevice device(threads);
@@ -580,21 +693,33 @@ RunResult runEmbree(const Scene& scene, const std::vector<Mesh>& meshes, int ste
           tbb::blocked_range<size_t>(0, block_hits.size(), 1),
           [&](const tbb::blocked_range<size_t>& range) {
             std::vector<uint32_t> candidates(bodies);
+            std::vector<EmbreeHit> found;
             for (size_t block = range.begin(); block != range.end(); ++block) {
               const size_t last = std::min(n, (block + 1) * kBlock);
               for (size_t i = block * kBlock; i < last; ++i) {
                 const Vec3 p = sheet.row(static_cast<Eigen::Index>(i)).transpose();
-                const size_t count = broadphase.candidates(p, kMaxDistance, candidates.data());
+                const size_t count = broadphase.candidates(p, query.distance, candidates.data());
                 block_pairs[block] += count;
                 Answer best;
                 for (size_t k = 0; k < count; ++k) {
                   const uint32_t b = candidates[k];
                   const Vec3 q = scene.deforming ? p : Vec3(inverse[b] * p);
+                  if (query.mode == QueryMode::kWithin) {
+                    found.clear();
+                    scenes[b]->within(q, query.distance, found);
+                    for (const EmbreeHit& f : found)
+                      if (f.distance < best.distance) {
+                        best.distance = f.distance;
+                        best.body = b;
+                      }
+                    best.count += static_cast<uint32_t>(found.size());
+                    continue;
+                  }
                   double d = 0;
                   TriangleIndex& w = warm[i * bodies + b];
                   const TriangleIndex t = scenes[b]->closest(q, kMaxDistance, w, d);
                   if (t != kInvalidIndex) w = t;
-                  if (t != kInvalidIndex && d <= kMaxDistance && d < best.distance) best = {d, b};
+                  if (t != kInvalidIndex && d <= kMaxDistance && d < best.distance) best = {d, b, 1};
                 }
                 answers[i] = best;
                 block_hits[block] += best.body != kInvalidIndex;
@@ -627,10 +752,11 @@ bool sameAnswers(const std::vector<Answer>& a, const std::vector<Answer>& b, std
   }
   for (size_t i = 0; i < a.size(); ++i) {
     const bool ha = a[i].body != kInvalidIndex, hb = b[i].body != kInvalidIndex;
-    if (ha != hb || (ha && std::abs(a[i].distance - b[i].distance) > 1e-9 * std::max(1.0, a[i].distance))) {
+    if (ha != hb || a[i].count != b[i].count ||
+        (ha && std::abs(a[i].distance - b[i].distance) > 1e-9 * std::max(1.0, a[i].distance))) {
       char text[200];
-      std::snprintf(text, sizeof(text), "point %zu: %.17g (body %u) vs %.17g (body %u)", i, a[i].distance,
-                    a[i].body, b[i].distance, b[i].body);
+      std::snprintf(text, sizeof(text), "point %zu: %.17g (body %u, %u hits) vs %.17g (body %u, %u hits)", i,
+                    a[i].distance, a[i].body, a[i].count, b[i].distance, b[i].body, b[i].count);
       message = text;
       return false;
     }
@@ -773,6 +899,10 @@ int main(int argc, char** argv) {
   }
   std::vector<std::shared_ptr<const Hierarchy>> hierarchies;
   for (const Mesh& m : meshes) hierarchies.push_back(Hierarchy::build(m));
+  Query query;
+  if (options.within > 0) query = {QueryMode::kWithin, options.within};
+  std::printf("Query: %s %g of every point.\n\n", query.mode == QueryMode::kWithin ? "every triangle within" : "the closest hit within",
+              query.distance);
   std::printf("| kind | bodies | points | method | threads | median ms/step | min ms/step | CPU ms/step | "
               "all threads CPU ms/step | pairs/point | hits | certified |\n"
               "|---|---|---|---|---|---|---|---|---|---|---|---|\n");
@@ -784,8 +914,8 @@ int main(int argc, char** argv) {
         std::vector<RunResult> results;
         for (const std::string& method : options.methods) {
           for (unsigned threads : options.threads) {
-            const RunResult r = method == "meshsweeper" ? runMeshsweeper(scene, hierarchies, options.steps, threads, options.reach_steps, options.lead_steps)
-                                                        : runEmbree(scene, meshes, options.steps, threads);
+            const RunResult r = method == "meshsweeper" ? runMeshsweeper(scene, hierarchies, options.steps, threads, options.reach_steps, options.lead_steps, query)
+                                                        : runEmbree(scene, meshes, options.steps, threads, query);
             std::printf("| %s | %zu | %zu | %s | %u | %.2f | %.2f | %.2f | %.2f | %.2f | %.1f%% | %s |\n",
                         kind.c_str(), bodies, points, method.c_str(), threads, 1e3 * median(r.wall),
                         1e3 * *std::min_element(r.wall.begin(), r.wall.end()), 1e3 * median(r.cpu),

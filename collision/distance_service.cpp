@@ -309,8 +309,10 @@ struct DistanceService::Impl {
 
   // The hit of a query point q (in the body's frame) on `face` of body `slot`: closest point
   // c (body frame), feature, barycentric coordinates, distance.
+  // `signed_hit` false: the caller sets the sign (signLikeClosest), so the pseudonormal is only
+  // needed for the direction at distance 0.
   DistanceHit makeHit(uint32_t slot, const Vec3& q, TriangleIndex face, Feature feature, const Vec3& c,
-                      const Vec3& barycentric, double distance) const {
+                      const Vec3& barycentric, double distance, bool signed_hit = true) const {
     const Body& b = bodies[slot];
     const BodyShape& shape = *b.shape;
     DistanceHit hit;
@@ -325,7 +327,7 @@ struct DistanceService::Impl {
     // The pseudonormal gives a closed body's sign, and the direction at distance 0; an open
     // moving body skips it otherwise (evaluated at the current positions, it is not free).
     Vec3 normal = Vec3::Zero();
-    if (hit.closed_body || !(length > 0))
+    if ((signed_hit && hit.closed_body) || !(length > 0))
       normal = b.kind == BodyKind::kRigid ? shape.restPseudonormal(face, feature)
                                           : shape.pseudonormal(face, feature, b.positions());
     Vec3 direction = Vec3::Zero();
@@ -374,16 +376,10 @@ struct DistanceService::Impl {
     }
   }
 
-  void closestBlock(size_t block, const PointsRef& points, double d, StepResult& out) {
-    Scratch& s = scratch.local();
-    const size_t bs = options.block_size;
-    const size_t first = block * bs;
-    const uint32_t count = static_cast<uint32_t>(std::min<size_t>(bs, points.rows() - first));
+  // The block's pair states for this step's candidates (s.candidates): reused in place when
+  // every point kept its bodies; else rebuilt, keeping the states of the pairs that remain.
+  BlockStates& alignStates(Scratch& s, size_t block, uint32_t count) {
     const size_t slots = bodies.size();
-    StepStats& stats = block_stats[block];
-    blockCandidates(s, points, first, count, d, out, stats);
-
-    // Reuse the block's states in place when every point kept its bodies; else rebuild.
     BlockStates& states = blocks[block];
     bool same = states.points == count;
     for (uint32_t j = 0; same && j < count; ++j) {
@@ -430,6 +426,17 @@ struct DistanceService::Impl {
         s.pairs.shrink_to_fit();
       }
     }
+    return states;
+  }
+
+  void closestBlock(size_t block, const PointsRef& points, double d, StepResult& out) {
+    Scratch& s = scratch.local();
+    const size_t bs = options.block_size;
+    const size_t first = block * bs;
+    const uint32_t count = static_cast<uint32_t>(std::min<size_t>(bs, points.rows() - first));
+    StepStats& stats = block_stats[block];
+    blockCandidates(s, points, first, count, d, out, stats);
+    BlockStates& states = alignStates(s, block, count);
 
     // Two passes: the queries, then the hits. A hit's pseudonormal is a table lookup that
     // usually misses the cache; the first pass starts loading it, the second reads it.
@@ -491,34 +498,45 @@ struct DistanceService::Impl {
     const size_t bs = options.block_size;
     const size_t first = block * bs;
     const uint32_t count = static_cast<uint32_t>(std::min<size_t>(bs, points.rows() - first));
-    const size_t slots = bodies.size();
     StepStats& stats = block_stats[block];
     blockCandidates(s, points, first, count, d, out, stats);
+    BlockStates& states = alignStates(s, block, count);
     std::vector<DistanceHit>& hits = block_hits[block];
     hits.clear();
     for (uint32_t j = 0; j < count; ++j) {
       const size_t i = first + j;
       const Vec3 p = points.row(i).transpose();
       s.point_hits.clear();
-      const uint32_t* cand = s.candidates.data() + j * slots;
-      for (uint32_t k = 0; k < s.candidate_count[j]; ++k) {
-        const uint32_t slot = cand[k];
+      for (uint32_t k = states.begin[j]; k < states.begin[j + 1]; ++k) {
+        if (k + 2 < states.pairs.size()) prefetchPair(states.pairs[k + 2]);
+        PairState& pair = states.pairs[k];
+        const uint32_t slot = pair.slot;
         const Vec3 q = toBody(slot, p);
         QueryStream& qs = stream(s, slot);
-        qs.within(q, d, s.triangle_hits);
+        if (pair.state.lineage != 0) ++stats.warm_pairs;
+        bool certified = false;
+        qs.withinCoherent(q, d, pair.state, s.triangle_hits, &certified);
+        stats.certified_pairs += certified;
         stats.triangles_tested += qs.counters().triangles_tested;
         s.streams[slot].leaves_tested += qs.counters().leaves_tested;
         const size_t from = s.point_hits.size();
+        if (s.triangle_hits.empty()) continue;
+        // The first, closest hit gives every hit of this body its sign (signLikeClosest).
         for (const TriangleHit& t : s.triangle_hits)
-          s.point_hits.push_back(makeHit(slot, q, t.triangle, t.feature, t.point, t.barycentric, t.distance));
+          s.point_hits.push_back(makeHit(slot, q, t.triangle, t.feature, t.point, t.barycentric, t.distance,
+                                         s.point_hits.size() == from));
         signLikeClosest(s.point_hits.data() + from, s.point_hits.data() + s.point_hits.size());
+        // Each body's hits come sorted (by distance, then triangle): merge the runs.
+        if (from > 0)
+          std::inplace_merge(s.point_hits.begin(), s.point_hits.begin() + static_cast<std::ptrdiff_t>(from),
+                             s.point_hits.end(), hitOrder);
       }
-      std::sort(s.point_hits.begin(), s.point_hits.end(), hitOrder);
       out.begin_[i] = hits.size();  // block-local; offset added when the blocks are joined
       out.count_[i] = static_cast<uint32_t>(s.point_hits.size());
       hits.insert(hits.end(), s.point_hits.begin(), s.point_hits.end());
       stats.hits += s.point_hits.size();
     }
+    stats.states = states.pairs.size();
   }
 };
 
@@ -777,10 +795,10 @@ void DistanceService::step(PointsRef points, double max_distance, QueryMode mode
   out.count_.assign(n, 0);
   out.stats_ = {};
   m.block_stats.assign(block_count, StepStats{});
+  m.blocks.resize(block_count);  // blocks past the batch drop their states
   if (mode == QueryMode::kClosest) {
     out.begin_.clear();
     out.hits_.resize(n);
-    m.blocks.resize(block_count);  // blocks past the batch drop their states
   } else {
     out.begin_.resize(n);
     m.block_hits.resize(block_count);

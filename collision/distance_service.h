@@ -12,10 +12,10 @@
 //    step to the next, plus one QueryStream per thread and body that lends scratch memory.
 //
 // Coherent-state policy: a step keeps exactly the states of the (point, body) pairs it queried
-// in closest mode; a pair that the broadphase no longer reports (the point left the body's box
-// inflated by the query distance) is dropped, and starts cold if it comes back. Memory is
-// therefore bounded by the pairs of the last step. Steps in within mode neither use nor change
-// the states. A state is tied to the body's handle: removing a body drops its states (a new
+// (either mode: closest and within steps read and renew the same states); a pair that the
+// broadphase no longer reports (the point left the body's box inflated by the query distance)
+// is dropped, and starts cold if it comes back. Memory is therefore bounded by the pairs of
+// the last step. A state is tied to the body's handle: removing a body drops its states (a new
 // body in the same slot has a new generation and starts cold); remove() frees their memory at
 // once.
 //
@@ -100,8 +100,8 @@ struct StepStats {
   uint64_t points = 0;            // points in the batch
   uint64_t invalid_points = 0;    // points with status kNotFinite or kOutOfRange
   uint64_t pairs = 0;             // (point, body) pairs the broadphase passed to a body
-  uint64_t warm_pairs = 0;        // closest mode: pairs that had a state from the last step
-  uint64_t certified_pairs = 0;   // closest mode: pairs answered from the cached candidate set
+  uint64_t warm_pairs = 0;        // pairs that had a state from the last step
+  uint64_t certified_pairs = 0;   // pairs answered from the cached candidate set
   uint64_t out_of_reach_pairs = 0;  // closest mode: pairs with nothing within the distance (found
                                     // or certified without looking farther)
   uint64_t triangles_tested = 0;  // exact point-triangle distances

@@ -202,7 +202,8 @@ QueryStream::QueryStream(std::shared_ptr<const Hierarchy> hierarchy, CoherenceOp
 size_t QueryStream::stateBytes() const {
   return sizeof(*this) + stack_.capacity() * sizeof(StackEntry) + heap_.capacity() * sizeof(FrontEntry) +
          set_faces_.capacity() * sizeof(TriangleIndex) + set_blocks_.capacity() * sizeof(TriangleBlock8) +
-         gathered_.capacity() * sizeof(gathered_[0]) + front_.capacity() * sizeof(DriftEntry) +
+         gathered_.capacity() * sizeof(gathered_[0]) + within_keys_.capacity() * sizeof(within_keys_[0]) +
+         front_.capacity() * sizeof(DriftEntry) +
          popped_.capacity() * sizeof(DriftEntry);
 }
 
@@ -609,6 +610,33 @@ bool QueryStream::testSet(const CoherentState& state, const Vec3& p, double move
   return certified;
 }
 
+namespace {
+
+// A cold state with the same tuning.
+void restartState(CoherentState& state) {
+  const float reach_steps = state.reach_steps, lead_steps = state.lead_steps;
+  state = CoherentState{};
+  state.reach_steps = reach_steps;
+  state.lead_steps = lead_steps;
+}
+
+// The running means of the point's motion relative to the geometry (its step plus the growth
+// of the lineage's drift), from which a set's reach and lead are taken.
+void trackMotion(CoherentState& state, const Vec3& p, double drift) {
+  const Vec3 point_step = p - state.last_point;
+  const double step = point_step.norm() + (drift - state.last_drift);
+  const Eigen::Vector3f velocity = point_step.cast<float>();
+  if (state.mean_step > 0) {
+    state.mean_step = 0.9f * state.mean_step + 0.1f * static_cast<float>(step);
+    state.mean_velocity = 0.9f * state.mean_velocity + 0.1f * velocity;
+  } else {
+    state.mean_step = static_cast<float>(step);
+    state.mean_velocity = velocity;
+  }
+}
+
+}  // namespace
+
 ClosestPoint QueryStream::closestCoherent(const Vec3& p, CoherentState& state, bool* certified_out,
                                           double max_distance) {
   const TreeGeometry& g = geometry();
@@ -616,10 +644,7 @@ ClosestPoint QueryStream::closestCoherent(const Vec3& p, CoherentState& state, b
   counters_ = {};
   if (!inCoordinateRange(p, kMaxQueryCoordinate)) {
     if (certified_out) *certified_out = false;
-    const float reach_steps = state.reach_steps, lead_steps = state.lead_steps;
-    state = CoherentState{};
-    state.reach_steps = reach_steps;
-    state.lead_steps = lead_steps;
+    restartState(state);
     return unanswerable();
   }
   // Within a lineage faces move by at most the change of the geometry's drift: the previous
@@ -630,18 +655,7 @@ ClosestPoint QueryStream::closestCoherent(const Vec3& p, CoherentState& state, b
   // 1e-15 of the mesh's size) count as within it.
   const double within = cap < kInf ? cap * (1 + 1e-12) + 1e-15 / g.box_scale : kInf;
   const double within2 = within * within;
-  if (same_lineage) {
-    const Vec3 point_step = p - state.last_point;
-    const double step = point_step.norm() + (g.drift - state.last_drift);
-    const Eigen::Vector3f velocity = point_step.cast<float>();
-    if (state.mean_step > 0) {
-      state.mean_step = 0.9f * state.mean_step + 0.1f * static_cast<float>(step);
-      state.mean_velocity = 0.9f * state.mean_velocity + 0.1f * velocity;
-    } else {
-      state.mean_step = static_cast<float>(step);
-      state.mean_velocity = velocity;
-    }
-  }
+  if (same_lineage) trackMotion(state, p, g.drift);
   TriangleIndex face = kInvalidIndex;
   bool certified = false;
   double best2 = kInf;
@@ -715,6 +729,97 @@ ClosestPoint QueryStream::closestCoherent(const Vec3& p, CoherentState& state, b
   state.last_drift = g.drift;
   out.counters = counters_;
   return out;
+}
+
+// Tests a compact state's set for within(p, d), `moved` from its anchor (drift included):
+// when its certificate holds (every face outside the set is farther than d), out receives the
+// faces within d, as within() gives them, and it returns true.
+bool QueryStream::testSetWithin(const CoherentState& state, const Vec3& p, double moved, double d,
+                                std::vector<TriangleHit>& out) {
+  out.clear();
+  // within() keeps a face whose computed distance is <= d; a face outside the set is at least
+  // reach - moved away (up to the rounding of both, which the relative margins cover).
+  const double d_up = d * (1 + 1e-9);
+  if (!(d_up + moved < state.reach * (1 - 1e-9))) return false;
+  const TreeGeometry& g = geometry();
+  const Mesh& mesh = hierarchy_->mesh();
+  const double d2 = d * d * (1 + 1e-9);
+  double exact[8];
+  within_keys_.clear();
+  for (uint32_t first = 0; first < state.count; first += 8) {
+    if (state.block_lower[first / 8] - moved > d_up) break;  // sorted: the rest are farther
+    const uint32_t lanes = std::min<uint32_t>(8, state.count - first);
+    gatherTriangleBlock(mesh.triangles.data(), g.positions, state.faces + first, lanes, gather_);
+    squaredDistancesToBlock(p, gather_, exact);
+    counters_.triangles_tested += lanes;
+    for (uint32_t lane = 0; lane < lanes; ++lane)
+      if (exact[lane] <= d2) within_keys_.emplace_back(std::sqrt(exact[lane]), state.faces[first + lane]);
+  }
+  finishWithin(p, d, out);
+  return true;
+}
+
+void QueryStream::withinCoherent(const Vec3& p, double d, CoherentState& state, std::vector<TriangleHit>& out,
+                                 bool* certified_out) {
+  const TreeGeometry& g = geometry();
+  out.clear();
+  counters_ = {};
+  if (certified_out) *certified_out = false;
+  if (!(d >= 0)) return;  // NaN or negative: no face, as within()
+  if (!inCoordinateRange(p, kMaxQueryCoordinate)) {
+    restartState(state);
+    return;
+  }
+  const bool same_lineage = state.lineage != 0 && state.lineage == g.lineage;
+  if (same_lineage) trackMotion(state, p, g.drift);
+  bool certified = false;
+  if (same_lineage && state.has_set) {
+    const double moved = (p - state.anchor).norm() + (g.drift - state.drift_at);
+    certified = testSetWithin(state, p, moved, d, out);
+  }
+  bool answered = certified;
+  if (!answered && state.reach_steps > 0 && d < kInf) {
+    if (state.within_wait > 0) {
+      --state.within_wait;
+      state.has_set = false;
+    } else {
+      // Gathered within d + 2R, lead_steps mean steps ahead when that is within 2R (p must
+      // still be certified by it), else at p.
+      const double reach = 2.0 * std::max(static_cast<double>(state.reach_steps) * state.mean_step,
+                                          1e-6 / g.box_scale);
+      const double radius = d * (1 + 1e-9) + reach;
+      const Vec3 lead = static_cast<double>(state.lead_steps) * state.mean_velocity.cast<double>();
+      const double ahead = same_lineage ? lead.norm() : 0.0;
+      TriangleIndex ignored = kInvalidIndex;
+      if (ahead > 0 && ahead < reach) {
+        const Vec3 anchor = p + lead;
+        storeSet(anchor, gatherCandidates(anchor, 0.0, radius, kCoherentSetSize, ignored, true), state);
+        answered = state.has_set && testSetWithin(state, p, (p - anchor).norm(), d, out);
+      }
+      if (!answered) {
+        ignored = kInvalidIndex;
+        storeSet(p, gatherCandidates(p, 0.0, radius, kCoherentSetSize, ignored, true), state);
+        answered = state.has_set && testSetWithin(state, p, 0.0, d, out);
+      }
+      if (!answered) {  // more than a set's worth of faces within d: wait before trying again
+        state.has_set = false;
+        state.within_wait = 8;
+      }
+    }
+  }
+  if (!answered) {
+    const QueryCounters gathering = counters_;
+    within(p, d, out);
+    counters_.nodes_visited += gathering.nodes_visited;
+    counters_.leaves_tested += gathering.leaves_tested;
+    counters_.triangles_tested += gathering.triangles_tested;
+  }
+  if (certified_out) *certified_out = certified;
+  if (!out.empty()) state.last_face = out.front().triangle;
+  else if (!same_lineage) state.last_face = kInvalidIndex;
+  state.lineage = g.lineage;
+  state.last_point = p;
+  state.last_drift = g.drift;
 }
 
 ClosestPoint QueryStream::closestWithin(const Vec3& p, double tolerance) {
@@ -854,6 +959,7 @@ void QueryStream::within(const Vec3& p, double d, std::vector<TriangleHit>& out)
   const ScaledPoint sp = scalePoint(g, p);
   const float threshold = pruneThreshold(d * d, g.box_scale * g.box_scale);
   const TriangleIndex* lanes = h.leafTriangles().data();
+  within_keys_.clear();
   stack_.clear();
   stack_.push_back({0, 0.0f});
   float dist[8];
@@ -864,11 +970,8 @@ void QueryStream::within(const Vec3& p, double d, std::vector<TriangleHit>& out)
     if (isLeafRef(entry.ref)) {
       const int32_t leaf = leafIndex(entry.ref);
       const uint32_t used = testLeaf(leaf, p, exact);
-      for (uint32_t lane = 0; lane < used; ++lane) {
-        if (!(exact[lane] <= d * d * (1 + 1e-9))) continue;
-        const TriangleHit hit = hitOn(lanes[8 * leaf + lane], p);
-        if (hit.distance <= d) out.push_back(hit);
-      }
+      for (uint32_t lane = 0; lane < used; ++lane)
+        if (exact[lane] <= d * d * (1 + 1e-9)) within_keys_.emplace_back(std::sqrt(exact[lane]), lanes[8 * leaf + lane]);
       continue;
     }
     const Node8& node = g.nodes[entry.ref];
@@ -878,7 +981,20 @@ void QueryStream::within(const Vec3& p, double d, std::vector<TriangleHit>& out)
       if (node.child[k] != kEmptyChild && dist[k] <= threshold) stack_.push_back({node.child[k], dist[k]});
     }
   }
-  std::sort(out.begin(), out.end(), hitBefore);
+  finishWithin(p, d, out);
+}
+
+// The hits of the faces in within_keys_ (distance, face) whose distance is <= d, in within()'s
+// order. The keys are sorted first (small entries, not the hits); the block kernel's distance
+// is the scalar one bit for bit, so the hits come out in order (checked, sorted if not).
+void QueryStream::finishWithin(const Vec3& p, double d, std::vector<TriangleHit>& out) {
+  std::sort(within_keys_.begin(), within_keys_.end());
+  out.clear();
+  for (const auto& key : within_keys_) {
+    const TriangleHit hit = hitOn(key.second, p);
+    if (hit.distance <= d) out.push_back(hit);
+  }
+  if (!std::is_sorted(out.begin(), out.end(), hitBefore)) std::sort(out.begin(), out.end(), hitBefore);
 }
 
 // ---- The dynamic front (paper section 5.1) ----

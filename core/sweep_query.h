@@ -87,6 +87,8 @@ struct CoherentState {
   float lead_steps = 3;              // a set is gathered this many mean steps ahead of the point,
                                      // along mean_velocity (when within 2 R; 0: at the point)
   bool has_set = false;              // anchor, reach and faces hold a certificate
+  uint8_t within_wait = 0;           // withinCoherent: steps to go before gathering a set again
+                                     // (the last one could not hold every face within d)
   Vec3 last_point = Vec3::Zero();
   Eigen::Vector3f mean_velocity = Eigen::Vector3f::Zero();  // running mean of the point's steps
   TriangleIndex faces[kCoherentSetSize];        // candidates, in blocks of eight
@@ -152,6 +154,15 @@ class QueryStream {
   ClosestPoint closestCoherent(const Vec3& p, CoherentState& state, bool* certified = nullptr,
                                double max_distance = std::numeric_limits<double>::infinity());
 
+  // All faces within d of a moving point (the answer of within(), the same faces, hits and
+  // order), from the same compact state: a set gathered within d + 2R of its anchor (at most
+  // kCoherentSetSize faces, the nearest) answers while d + (motion since) stays below its
+  // reach; else it is gathered again. Where more faces than that lie within d, the step is a
+  // plain within() query and the state waits a few steps before trying a set again. A state
+  // serves closestCoherent and withinCoherent alike (both read the same certificate).
+  void withinCoherent(const Vec3& p, double d, CoherentState& state, std::vector<TriangleHit>& out,
+                      bool* certified = nullptr);
+
   // The paper's dynamic process for a moving point: the priority front persists between calls;
   // moving by delta lowers every bound by delta (a drift offset, O(1)), stale entries are
   // recomputed when they reach the front. Same contracts as closestWithin() and kClosest().
@@ -206,6 +217,9 @@ class QueryStream {
   void canonicalExact(const Vec3& p, ClosestPoint& out);
   bool testSet(const CoherentState& state, const Vec3& p, double moved, double within, double& best2,
                TriangleIndex& face);
+  bool testSetWithin(const CoherentState& state, const Vec3& p, double moved, double d,
+                     std::vector<TriangleHit>& out);
+  void finishWithin(const Vec3& p, double d, std::vector<TriangleHit>& out);
   double depthFirst(const Vec3& p, double start2, double reach, TriangleIndex& best_face,
                     uint32_t capacity = 0);
   double entryBound(const DriftEntry& e, const Vec3& p, const float q[3], bool far) const;
@@ -235,6 +249,7 @@ class QueryStream {
   std::vector<TriangleBlock8> set_blocks_;  // candidates' coordinates, 8 per block
   std::vector<float> set_block_lower_;      // per block: its and later faces' least distance
   std::vector<std::pair<double, TriangleIndex>> gathered_;
+  std::vector<std::pair<double, TriangleIndex>> within_keys_;  // within: (distance, face) found
   double pruned_lower_ = 0;  // depthFirst with reach > 0: a lower bound on what it did not gather
   bool has_last_ = false;
   Vec3 last_point_ = Vec3::Zero();

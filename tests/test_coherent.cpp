@@ -532,6 +532,91 @@ TEST_CASE("coherent queries: sets gathered ahead of a moving point", "[coherent]
   }
 }
 
+// withinCoherent answers from a compact state's set while its certificate holds: the same faces,
+// hits and order as within() (bitwise) at every step, along paths with a radius that changes
+// every step (sometimes 0, sometimes so large that no set can hold the faces within it, NaN,
+// negative or infinite), with the same state also serving closestCoherent in between, on real
+// and procedural meshes (a soup included).
+bool sameWithin(const std::vector<TriangleHit>& a, const std::vector<TriangleHit>& b) {
+  if (a.size() != b.size()) return false;
+  for (size_t i = 0; i < a.size(); ++i)
+    if (a[i].distance != b[i].distance || a[i].triangle != b[i].triangle || a[i].point != b[i].point ||
+        a[i].barycentric != b[i].barycentric || a[i].feature != b[i].feature)
+      return false;
+  return true;
+}
+
+TEST_CASE("coherent queries: withinCoherent equals within along paths", "[coherent]") {
+  struct Case {
+    std::string name;
+    Mesh mesh;
+  };
+  std::vector<Case> cases;
+  for (const char* name : {"holes", "armadillo"})
+    if (const Mesh* m = realMesh(name)) cases.push_back({name, *m});
+  cases.push_back({"torus", scenes::torus(1.0, 0.3, 64, 32)});
+  cases.push_back({"soup", scenes::randomSoup(1500, 11)});
+  for (const Case& c : cases) {
+    INFO("mesh " << c.name);
+    const auto h = Hierarchy::build(c.mesh);
+    const double diagonal = meshDiagonal(c.mesh);
+    const PathSpec spec{"step 0.05%, 0.2-3% off", 0.0005, 0.002, 0.03, 700, 250, 0x3e11};
+    const std::vector<Vec3> path = makePath(c.mesh, h, spec);
+    QueryStream coherent(h), plain(h);
+    Random random(0x3e12);
+    CoherentState state;
+    Failures same("withinCoherent == within"), brute("within count vs brute force"),
+        closest("closestCoherent on the shared state");
+    const Checker checker{c.mesh, diagonal};
+    std::vector<TriangleHit> got, expected;
+    size_t certified_steps = 0, hits = 0;
+    for (size_t i = 0; i < path.size(); ++i) {
+      const Vec3& p = path[i];
+      // Mostly a steady radius (the set lasts), now and then a new one.
+      double d = (i / 40) % 2 ? 0.01 * diagonal : 0.02 * diagonal;
+      if (i % 97 == 5) d = 0;
+      if (i % 97 == 50) d = 0.5 * diagonal;  // more faces within d than a set holds
+      if (i % 131 == 7) d = random.uniform(0, 0.05) * diagonal;
+      INFO("step " << i << ", point " << text(p) << ", d " << num(d));
+      bool certified = false;
+      coherent.withinCoherent(p, d, state, got, &certified);
+      plain.within(p, d, expected);
+      certified_steps += certified;
+      hits += got.size();
+      same.check(sameWithin(got, expected), [&] {
+        return "got " + std::to_string(got.size()) + " faces, within() " + std::to_string(expected.size());
+      });
+      if (i % 50 == 0) {
+        // Faces clearly inside or outside d (not within 1e-9 relative of it) are decided alike.
+        const std::vector<BruteHit> truth = bruteForceWithin(c.mesh, p, d * (1 + 1e-9));
+        size_t sure = 0;
+        for (const BruteHit& t : truth) sure += t.distance <= d * (1 - 1e-9);
+        brute.check(got.size() >= sure && got.size() <= truth.size(), [&] {
+          return std::to_string(got.size()) + " faces, brute force " + std::to_string(sure) + "-" +
+                 std::to_string(truth.size());
+        });
+      }
+      if (i % 3 == 0) checker.exact(coherent.closestCoherent(p, state), p, Truth{bruteForceKClosest(c.mesh, p, 1)}, closest);
+    }
+    // Odd radii and points: the same answers as within(), and the state goes on.
+    const Vec3 p = path.back();
+    for (double d : {-1.0, std::numeric_limits<double>::quiet_NaN(), std::numeric_limits<double>::infinity()}) {
+      coherent.withinCoherent(p, d, state, got);
+      plain.within(p, d, expected);
+      CHECK(sameWithin(got, expected));
+    }
+    coherent.withinCoherent(Vec3(std::numeric_limits<double>::quiet_NaN(), 0, 0), 1.0, state, got);
+    CHECK(got.empty());
+    CHECK(state.lineage == 0);  // restarted
+    coherent.withinCoherent(p, 0.01 * diagonal, state, got);
+    plain.within(p, 0.01 * diagonal, expected);
+    CHECK(sameWithin(got, expected));
+    CHECK(same.checks() == path.size());
+    CHECK(hits > 1000);
+    CHECK(certified_steps > path.size() / 2);  // the sets answer most steps
+  }
+}
+
 TEST_CASE("coherent queries: a stationary point", "[coherent]") {
   const Mesh mesh = scenes::torus(1.0, 0.3, 64, 32);
   const auto h = Hierarchy::build(mesh);

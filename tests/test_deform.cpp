@@ -550,9 +550,14 @@ void checkInflated(const Mesh& mesh, size_t points, size_t path_steps, uint64_t 
     // drift): their certificates survive the deformation.
     Failures state_f("closestCoherent(p, CoherentState) on a deforming body");
     Failures capped_f("closestCoherent(p, CoherentState, cap) on a deforming body");
-    CoherentState state, capped;
-    size_t certified_steps = 0;
+    CoherentState state, capped, within_state;
+    size_t certified_steps = 0, within_certified = 0;
     const double cap = 0.01 * diagonal;
+    // withinCoherent on the deforming body: the same hits as a plain within() at every step.
+    QueryStream plain(h);
+    plain.setGeometry(&body.geometry());
+    Failures within_f("withinCoherent on a deforming body");
+    std::vector<TriangleHit> got, expected;
     for (size_t i = 0; i < path.size(); ++i) {
       const double amount = 0.9 * delta * std::sin(0.03 * static_cast<double>(i));
       const std::vector<Vec3> next = add(mesh.positions, displacement(mesh, std::abs(amount), 0.01 * static_cast<double>(i)));
@@ -573,8 +578,19 @@ void checkInflated(const Mesh& mesh, size_t points, size_t path_steps, uint64_t 
       else if (truth.distance > cap * (1 + 1e-9))
         capped_f.check(r.triangle == kInvalidIndex && r.lower <= truth.distance,
                        [&] { return "cap " + num(cap) + ", brute force " + num(truth.distance) + ": got a face"; });
+      compact.withinCoherent(path[i], 2 * cap, within_state, got, &certified);
+      within_certified += certified;
+      plain.within(path[i], 2 * cap, expected);
+      within_f.check(got.size() == expected.size() &&
+                         std::equal(got.begin(), got.end(), expected.begin(),
+                                    [](const TriangleHit& a, const TriangleHit& b) {
+                                      return a.triangle == b.triangle && a.distance == b.distance && a.point == b.point;
+                                    }),
+                     [&] { return std::to_string(got.size()) + " faces, within() " + std::to_string(expected.size()); });
     }
     CHECK(certified_steps > 0);
+    CHECK(within_certified > 0);
+    CHECK(within_f.checks() == path.size());
   }
 }
 

@@ -321,7 +321,7 @@ TEST_CASE("service equals brute force step by step, rigid, key-framed and deform
 
   Failures closest("closest vs brute force"), within("within vs brute force"), identical("1 vs 2 threads");
   StepResult r1, r2;
-  uint64_t certified = 0, warm = 0, out_of_reach = 0;
+  uint64_t certified = 0, warm = 0, out_of_reach = 0, within_certified = 0;
   size_t reanchored = 0, inline_steps = 0;
   const int steps = 7;
   for (int s = 0; s < steps; ++s) {
@@ -368,12 +368,14 @@ TEST_CASE("service equals brute force step by step, rigid, key-framed and deform
       twin.two.step(matrix, d, QueryMode::kWithin, r2);
       checkIdentical(r1, r2, identical);
       checkStep(twin, points, d, QueryMode::kWithin, r1, within);
+      within_certified += r1.stats().certified_pairs;
     }
   }
   // The coherent states are used: warm pairs, and answers from the certificate.
   CHECK(warm > 0);
   CHECK(certified > 0);
   CHECK(out_of_reach > 0);  // pairs with nothing within d were answered (and the answers still match)
+  CHECK(within_certified > 0);  // within steps answered from the states' sets too
   CHECK(reanchored > 0);  // the deformation outgrew its bound at least once
   CHECK(inline_steps > 0);  // the deforming body was queried both ways
   CHECK(closest.checks() > 1000);
@@ -592,10 +594,10 @@ TEST_CASE("coherent states stay bounded; removed bodies drop theirs", "[service]
   service.step(toMatrix(std::vector<Vec3>(points.begin(), points.begin() + 40)), 0.3, QueryMode::kClosest, r);
   CHECK(service.coherentStates() == r.stats().pairs);
   CHECK(service.coherentStates() <= 80);
-  // Within mode keeps the states as they are.
-  const size_t kept = service.coherentStates();
+  // Within mode keeps the states of its pairs too.
   service.step(toMatrix(points), 0.3, QueryMode::kWithin, r);
-  CHECK(service.coherentStates() == kept);
+  CHECK(service.coherentStates() == r.stats().pairs);
+  CHECK(service.coherentStates() > 80);
   // A removed body: the next step has no pairs on it.
   service.remove(b);
   service.step(toMatrix(points), 0.3, QueryMode::kClosest, r);
