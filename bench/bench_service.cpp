@@ -193,28 +193,9 @@ float roundUpToFloat(double x) {
   return f;
 }
 
-inline double ericsonSquaredDistance(const Vec3& p, const Vec3& a, const Vec3& b, const Vec3& c) {
-  const Vec3 ab = b - a, ac = c - a, ap = p - a;
-  const double d1 = ab.dot(ap), d2 = ac.dot(ap);
-  if (d1 <= 0 && d2 <= 0) return ap.squaredNorm();
-  const Vec3 bp = p - b;
-  const double d3 = ab.dot(bp), d4 = ac.dot(bp);
-  if (d3 >= 0 && d4 <= d3) return bp.squaredNorm();
-  const double vc = d1 * d4 - d3 * d2;
-  if (vc <= 0 && d1 >= 0 && d3 <= 0) return (ap - (d1 / (d1 - d3)) * ab).squaredNorm();
-  const Vec3 cp = p - c;
-  const double d5 = ab.dot(cp), d6 = ac.dot(cp);
-  if (d6 >= 0 && d5 <= d6) return cp.squaredNorm();
-  const double vb = d5 * d2 - d1 * d6;
-  if (vb <= 0 && d2 >= 0 && d6 <= 0) return (ap - (d2 / (d2 - d6)) * ac).squaredNorm();
-  const double va = d3 * d6 - d5 * d4;
-  if (va <= 0 && d4 - d3 >= 0 && d5 - d6 >= 0) return (bp - ((d4 - d3) / ((d4 - d3) + (d5 - d6))) * (c - b)).squaredNorm();
-  const double inv = 1.0 / (va + vb + vc);
-  return (ap - (vb * inv) * ab - (vc * inv) * ac).squaredNorm();
-}
-
-// The same, with the closest point's barycentric coordinates (v, w on ab, ac: point a + v ab + w ac),
-// as a within-mode user needs them for every hit.
+// Ericson's closest point on a triangle (Real-Time Collision Detection, 5.1.5): its squared
+// distance, and its barycentric coordinates v, w on ab, ac (point a + v ab + w ac), as a
+// within-mode user needs them for every hit.
 inline double ericsonClosest(const Vec3& p, const Vec3& a, const Vec3& b, const Vec3& c, double& v, double& w) {
   const Vec3 ab = b - a, ac = c - a, ap = p - a;
   const double d1 = ab.dot(ap), d2 = ac.dot(ap);
@@ -249,6 +230,11 @@ inline double ericsonClosest(const Vec3& p, const Vec3& a, const Vec3& b, const 
   v = vb * inv;
   w = vc * inv;
   return (ap - v * ab - w * ac).squaredNorm();
+}
+
+inline double ericsonSquaredDistance(const Vec3& p, const Vec3& a, const Vec3& b, const Vec3& c) {
+  double v, w;
+  return ericsonClosest(p, a, b, c, v, w);
 }
 
 bool needsRobustKernel(const Vec3& a, const Vec3& b, const Vec3& c) {

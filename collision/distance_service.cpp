@@ -429,14 +429,30 @@ struct DistanceService::Impl {
     return states;
   }
 
-  void closestBlock(size_t block, const PointsRef& points, double d, StepResult& out) {
+  // A block's points [first, first + count): their candidates (broadphase) and pair states.
+  struct BlockWork {
+    Scratch& scratch;
+    size_t first;
+    uint32_t count;
+    StepStats& stats;
+    BlockStates& states;
+  };
+  BlockWork beginBlock(size_t block, const PointsRef& points, double d, StepResult& out) {
     Scratch& s = scratch.local();
-    const size_t bs = options.block_size;
-    const size_t first = block * bs;
-    const uint32_t count = static_cast<uint32_t>(std::min<size_t>(bs, points.rows() - first));
+    const size_t first = block * options.block_size;
+    const uint32_t count = static_cast<uint32_t>(std::min<size_t>(options.block_size, points.rows() - first));
     StepStats& stats = block_stats[block];
     blockCandidates(s, points, first, count, d, out, stats);
-    BlockStates& states = alignStates(s, block, count);
+    return {s, first, count, stats, alignStates(s, block, count)};
+  }
+
+  void closestBlock(size_t block, const PointsRef& points, double d, StepResult& out) {
+    const BlockWork w = beginBlock(block, points, d, out);
+    Scratch& s = w.scratch;
+    const size_t first = w.first;
+    const uint32_t count = w.count;
+    StepStats& stats = w.stats;
+    BlockStates& states = w.states;
 
     // Two passes: the queries, then the hits. A hit's pseudonormal is a table lookup that
     // usually misses the cache; the first pass starts loading it, the second reads it.
@@ -494,13 +510,12 @@ struct DistanceService::Impl {
   }
 
   void withinBlock(size_t block, const PointsRef& points, double d, StepResult& out) {
-    Scratch& s = scratch.local();
-    const size_t bs = options.block_size;
-    const size_t first = block * bs;
-    const uint32_t count = static_cast<uint32_t>(std::min<size_t>(bs, points.rows() - first));
-    StepStats& stats = block_stats[block];
-    blockCandidates(s, points, first, count, d, out, stats);
-    BlockStates& states = alignStates(s, block, count);
+    const BlockWork w = beginBlock(block, points, d, out);
+    Scratch& s = w.scratch;
+    const size_t first = w.first;
+    const uint32_t count = w.count;
+    StepStats& stats = w.stats;
+    BlockStates& states = w.states;
     std::vector<DistanceHit>& hits = block_hits[block];
     hits.clear();
     for (uint32_t j = 0; j < count; ++j) {
