@@ -447,12 +447,7 @@ struct DistanceService::Impl {
   }
 
   void closestBlock(size_t block, const PointsRef& points, double d, StepResult& out) {
-    const BlockWork w = beginBlock(block, points, d, out);
-    Scratch& s = w.scratch;
-    const size_t first = w.first;
-    const uint32_t count = w.count;
-    StepStats& stats = w.stats;
-    BlockStates& states = w.states;
+    auto&& [s, first, count, stats, states] = beginBlock(block, points, d, out);
 
     // Two passes: the queries, then the hits. A hit's pseudonormal is a table lookup that
     // usually misses the cache; the first pass starts loading it, the second reads it.
@@ -510,12 +505,7 @@ struct DistanceService::Impl {
   }
 
   void withinBlock(size_t block, const PointsRef& points, double d, StepResult& out) {
-    const BlockWork w = beginBlock(block, points, d, out);
-    Scratch& s = w.scratch;
-    const size_t first = w.first;
-    const uint32_t count = w.count;
-    StepStats& stats = w.stats;
-    BlockStates& states = w.states;
+    auto&& [s, first, count, stats, states] = beginBlock(block, points, d, out);
     std::vector<DistanceHit>& hits = block_hits[block];
     hits.clear();
     for (uint32_t j = 0; j < count; ++j) {
