@@ -16,7 +16,7 @@
 //   closest_point_and_primitive(p, previous answer)), cgal_fresh (its KD-tree hint).
 // Deformation (per mesh; key frames = rest and a smoothly deformed copy: a wave along the
 // normals and a twist, every vertex moves; t advances through [0, 1]):
-//   bounds/MESH/METHOD   one iteration = one frame: ms_kf_bounds (KeyframeBody::interpolateBounds),
+//   bounds/MESH/METHOD   one iteration = one frame: ms_kf_bounds (KeyframeBody::interpolatedBounds),
 //     ms_kf_settime (setTime: bounds and positions), ms_setpositions (DeformingBody::setPositions,
 //     the per-step check), ms_setpositions_inline (the same with inline faces: the check, the
 //     leaf blocks refreshed and the boxes refitted), ms_inflate (DeformingBody::inflate with per-vertex bounds),
@@ -332,6 +332,7 @@ struct DeformFixture {
   std::unique_ptr<DeformingBody> deforming;
   std::unique_ptr<DeformingBody> deforming_inline;  // the same with inline faces
   std::unique_ptr<EmbreeRefitScene> refit;
+  std::vector<Node8> bounds_scratch;            // interpolatedBounds output
   std::unique_ptr<CgalHintedClosest> cgal;
   // At t = 0.5:
   Mesh half;                                      // the deformed mesh
@@ -658,7 +659,7 @@ void benchBounds(benchmark::State& state, std::string mesh_name, BoundsMethod me
     switch (method) {
       case BoundsMethod::kKfBounds: {
         const double start = processCpuSeconds();
-        d.keyframe->interpolateBounds(d.times[j]);
+        d.keyframe->interpolatedBounds(d.times[j], d.bounds_scratch);
         seconds = processCpuSeconds() - start;
         break;
       }

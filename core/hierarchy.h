@@ -16,6 +16,8 @@
 #include "core/mesh.h"
 #include "core/triangle_distance.h"
 
+#include <cmath>
+#include <limits>
 #include <memory>
 #include <string>
 #include <vector>
@@ -57,6 +59,14 @@ struct TreeGeometry {
   uint64_t lineage = 0;
   double drift = 0;
 };
+
+// A lineage's drift after a change that moved no vertex farther than `motion`: rounded up, so
+// that the difference of two drift values never falls short of the motion between them, even
+// when the motion is below the drift's rounding (a long-lived lineage).
+inline double grownDrift(double drift, double motion) {
+  if (!(motion > 0)) return drift;
+  return std::nextafter(drift + motion * (1 + 1e-12), std::numeric_limits<double>::infinity());
+}
 
 // A process-wide unique, never-zero geometry version (thread-safe). Every geometry, and every
 // change of one, takes a new value, so coherent state never mistakes one geometry for another.

@@ -844,7 +844,7 @@ ClosestPoint QueryStream::closestWithin(const Vec3& p, double tolerance) {
   while (true) {
     if (heap_.empty()) { lower = upper; break; }
     lower = std::min(heap_.front().key, upper);
-    if (upper - lower <= tolerance) break;
+    if (upper < kInf && upper - lower <= tolerance) break;  // an infinite tolerance still needs a point
     std::pop_heap(heap_.begin(), heap_.end(), before);
     const FrontEntry entry = heap_.back();
     heap_.pop_back();
@@ -1064,7 +1064,7 @@ void QueryStream::frontRefine(const Vec3& p, const float q[3], bool far, double&
   front_tie_ = true;  // unless a face at the top proves otherwise
   while (!front_.empty()) {
     lower = std::min(front_.front().key - drift_, upper);
-    if (stop_at_tolerance && upper - lower <= tolerance) break;
+    if (stop_at_tolerance && upper < kInf && upper - lower <= tolerance) break;
     if (!stop_at_tolerance && out->size() >= k) break;
     DriftEntry e = frontPop();
     if (e.drift_at < drift_) {  // stale: recompute at p and put back
@@ -1138,6 +1138,11 @@ void QueryStream::frontMove(const Vec3& p) {
   } else {
     drift_ += moved;
     front_point_ = p;
+    // Keys are bound + drift when computed, rounded at the drift's magnitude: once the drift is
+    // large against what the front still resolves (its least bound now, or a thousandth of the
+    // mesh's size), start over, e.g. a point back from far away along the way it went.
+    const double least = front_.empty() ? 0.0 : front_.front().key - drift_;
+    if (drift_ > 1e3 * std::max(least, 1e-3 / geometry().box_scale)) frontStart(p);
   }
 }
 

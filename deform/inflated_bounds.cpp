@@ -208,7 +208,7 @@ DisplacementCheck DeformingBody::setPositions(const std::vector<Vec3>& positions
   positions_ = positions;
   refreshInlineFaces();
   geometry_.version = nextGeometryVersion();
-  geometry_.drift += std::sqrt(moved2) * (1 + 1e-12);
+  geometry_.drift = grownDrift(geometry_.drift, std::sqrt(moved2));
   return check;
 }
 

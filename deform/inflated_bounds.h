@@ -23,6 +23,10 @@ class DeformingBody {
  public:
   // Starts at the hierarchy's rest positions with exact bounds and zero displacement bounds.
   explicit DeformingBody(std::shared_ptr<const Hierarchy> hierarchy);
+  // Not copyable or movable: geometry() points into the body's own tables (hold bodies by
+  // pointer, as the distance service does).
+  DeformingBody(const DeformingBody&) = delete;
+  DeformingBody& operator=(const DeformingBody&) = delete;
 
   // Recomputes exact bounds at `positions` (as many as the mesh has, finite; else throws
   // std::invalid_argument) and makes them the anchor and the current positions; displacement

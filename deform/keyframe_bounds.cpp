@@ -73,18 +73,24 @@ KeyframeBody::KeyframeBody(std::shared_ptr<const Hierarchy> hierarchy,
   setTime(0);
 }
 
-void KeyframeBody::interpolateBounds(double t) {
+namespace {
+double clampedTime(double t, size_t frames) {
+  return std::clamp(std::isnan(t) ? 0.0 : t, 0.0, static_cast<double>(frames - 1));  // +inf: the last frame
+}
+}  // namespace
+
+void KeyframeBody::interpolatedBounds(double t, std::vector<Node8>& out_nodes) const {
   const size_t last = frames_.size() - 1;
-  t = std::clamp(std::isnan(t) ? 0.0 : t, 0.0, static_cast<double>(last));  // +inf: the last frame
+  t = clampedTime(t, frames_.size());
   const size_t f = std::min(static_cast<size_t>(t), last == 0 ? 0 : last - 1);
   const double s = last == 0 ? 0.0 : t - static_cast<double>(f);
-  time_ = t;
+  if (out_nodes.size() != nodes_.size()) out_nodes = nodes_;  // children and slots; bounds below
   const std::vector<Node8>& a = frame_nodes_[f];
   const std::vector<Node8>& b = frame_nodes_[last == 0 ? 0 : f + 1];
   const float inf = std::numeric_limits<float>::infinity();
   const float ws = static_cast<float>(s), wr = 1.0f - ws;
-  for (size_t node = 0; node < nodes_.size(); ++node) {
-    Node8& out = nodes_[node];
+  for (size_t node = 0; node < out_nodes.size(); ++node) {
+    Node8& out = out_nodes[node];
     const Node8& na = a[node];
     const Node8& nb = b[node];
     for (int axis = 0; axis < 3; ++axis) {
@@ -111,11 +117,12 @@ void KeyframeBody::interpolateBounds(double t) {
       out.eps[k] = floatAtLeast(std::min(from_a, from_b));
     }
   }
-  geometry_.version = nextGeometryVersion();
 }
 
 void KeyframeBody::setTime(double t) {
-  interpolateBounds(t);
+  interpolatedBounds(t, nodes_);  // in place: same size, so geometry_.nodes stays valid
+  time_ = clampedTime(t, frames_.size());
+  geometry_.version = nextGeometryVersion();
   const size_t last = frames_.size() - 1;
   const size_t f = std::min(static_cast<size_t>(time_), last == 0 ? 0 : last - 1);
   const double s = last == 0 ? 0.0 : time_ - static_cast<double>(f);
@@ -127,7 +134,7 @@ void KeyframeBody::setTime(double t) {
     moved2 = std::max(moved2, (x - positions_[v]).squaredNorm());
     positions_[v] = x;
   }
-  geometry_.drift += std::sqrt(moved2) * (1 + 1e-12);
+  geometry_.drift = grownDrift(geometry_.drift, std::sqrt(moved2));
 }
 
 }  // namespace meshsweeper

@@ -16,6 +16,10 @@ class KeyframeBody {
   // frames[f][vertex]: at least one frame, each with as many positions as the mesh, all finite.
   // Throws std::invalid_argument otherwise. Costs one radius computation per frame.
   KeyframeBody(std::shared_ptr<const Hierarchy> hierarchy, std::vector<std::vector<Vec3>> frames);
+  // Not copyable or movable: geometry() points into the body's own tables (hold bodies by
+  // pointer, as the distance service does).
+  KeyframeBody(const KeyframeBody&) = delete;
+  KeyframeBody& operator=(const KeyframeBody&) = delete;
 
   // Sets the time t in [0, frameCount() - 1] (clamped; NaN: 0): frame floor(t) and the next, weight
   // t - floor(t). Interpolates positions and bounds (the per-frame cost; no geometry rebuilt).
@@ -29,9 +33,11 @@ class KeyframeBody {
   const std::vector<Vec3>& positions() const { return positions_; }
   const std::shared_ptr<const Hierarchy>& hierarchy() const { return hierarchy_; }
 
-  // Updates only the bounds (not the positions) for time t: the part of setTime() that a
-  // benchmark compares with a BVH refit.
-  void interpolateBounds(double t);
+  // The nodes setTime(t) gives, written to `out`; the body does not change. `out` is filled
+  // with this body's nodes when its size differs, else (reused from an earlier call for this
+  // body) only their bounds are written. The part of setTime() that a benchmark compares with
+  // a BVH refit.
+  void interpolatedBounds(double t, std::vector<Node8>& out) const;
 
  private:
   std::shared_ptr<const Hierarchy> hierarchy_;

@@ -16,7 +16,10 @@ void RigidBody::setPose(const Eigen::Isometry3d& pose) {
     throw std::invalid_argument("RigidBody: the pose has a non-finite entry");
   if (!inCoordinateRange(pose.translation()))
     throw std::invalid_argument("RigidBody: the pose's translation is beyond 1e150 in magnitude");
-  if (!(r.transpose() * r).isIdentity(1e-9) || std::abs(r.determinant() - 1) > 1e-9)
+  // Queries map points by the inverse isometry (R^T): a rotation off orthonormal by e moves a
+  // world answer by about e times the point's distance from the body's origin, so only the
+  // rounding of a computed rotation is accepted.
+  if (!(r.transpose() * r).isIdentity(1e-12) || std::abs(r.determinant() - 1) > 1e-12)
     throw std::invalid_argument("RigidBody: the pose's rotation is not orthonormal (a rigid pose has no scale or shear)");
   pose_ = pose;
   inverse_ = pose.inverse(Eigen::Isometry);

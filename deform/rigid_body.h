@@ -11,7 +11,8 @@ namespace meshsweeper {
 class RigidBody {
  public:
   // Places `hierarchy` at `pose`. Throws std::invalid_argument if the pose is not rigid
-  // (rotation not orthonormal with determinant 1, to 1e-9) or not finite.
+  // (rotation not orthonormal with determinant 1, to 1e-12: re-orthonormalise a rotation
+  // composed over many steps) or not finite.
   explicit RigidBody(std::shared_ptr<const Hierarchy> hierarchy,
                      const Eigen::Isometry3d& pose = Eigen::Isometry3d::Identity());
 

@@ -617,6 +617,53 @@ TEST_CASE("coherent queries: withinCoherent equals within along paths", "[cohere
   }
 }
 
+// The dynamic front keys its entries by bound + drift: after an excursion far away and back
+// along the same ray (no single move is a jump), the drift is huge against the distance, and
+// the front must start over rather than answer from keys rounded at that magnitude.
+TEST_CASE("coherent queries: the dynamic front after a far excursion", "[coherent]") {
+  const Mesh mesh = scenes::icosphere(3);
+  const auto h = Hierarchy::build(mesh);
+  const Vec3 near(1.28, 0.93, 0.13);
+  const double truth = bruteForceClosest(mesh, near).distance;
+  std::vector<TriangleHit> hits;
+  for (double far : {1e6, 1e14, 1e15, 1e16, 1e100}) {
+    INFO("far " << far);
+    const Vec3 away = near * (far / near.norm());
+    QueryStream k(h), anytime(h), exact(h);
+    for (const Vec3& p : {near, away, near}) {
+      k.kClosestCoherent(p, 7, hits);
+      const ClosestPoint a = anytime.closestWithinCoherent(p, 0.01);
+      const ClosestPoint e = exact.closestWithinCoherent(p, 0);
+      const std::vector<BruteHit> expected = bruteForceKClosest(mesh, p, 7);
+      REQUIRE(hits.size() == 7);
+      for (size_t i = 0; i < 7; ++i) CHECK(hits[i].distance == Approx(expected[i].distance).epsilon(1e-12));
+      CHECK(a.lower <= expected[0].distance * (1 + 1e-12));
+      CHECK(a.upper >= expected[0].distance * (1 - 1e-12));
+      CHECK(a.upper - a.lower <= 0.01);
+      CHECK(e.distance == Approx(expected[0].distance).epsilon(1e-12));
+    }
+    CHECK(hits[0].distance == Approx(truth).epsilon(1e-12));
+  }
+}
+
+// An infinite tolerance still answers with a surface point (the first upper bound found).
+TEST_CASE("coherent queries: anytime queries with an infinite tolerance", "[coherent]") {
+  const Mesh mesh = scenes::torus(1.0, 0.3, 32, 16);
+  const auto h = Hierarchy::build(mesh);
+  QueryStream stream(h), front(h);
+  const double inf = std::numeric_limits<double>::infinity();
+  for (const Vec3& p : {Vec3(0.2, 0.1, 0.5), Vec3(1.0, 0.0, 0.31), Vec3(30, -20, 5)}) {
+    const double truth = bruteForceClosest(mesh, p).distance;
+    for (const ClosestPoint& r : {stream.closestWithin(p, inf), front.closestWithinCoherent(p, inf)}) {
+      CHECK(std::isfinite(r.distance));
+      CHECK(r.lower <= truth);
+      CHECK(r.upper >= truth * (1 - 1e-12));
+      CHECK(r.distance == r.upper);
+      CHECK((r.point - p).norm() == Approx(r.upper).epsilon(1e-9));
+    }
+  }
+}
+
 TEST_CASE("coherent queries: a stationary point", "[coherent]") {
   const Mesh mesh = scenes::torus(1.0, 0.3, 64, 32);
   const auto h = Hierarchy::build(mesh);

@@ -354,12 +354,17 @@ void checkKeyframes(const Mesh& mesh, size_t frame_count, size_t points_per_time
     checkFreshQueries(now, stream, queryPoints(now, points_per_time, points_per_time / 4 + 1, 2, seed + 7 * ti), checks);
   }
 
-  // interpolateBounds(t) gives the bounds setTime(t) gives.
+  // interpolatedBounds(t) gives the bounds setTime(t) gives, and leaves the body as it was.
   {
     const size_t nodes = h->nodes().size();
-    body.interpolateBounds(1.25);
-    std::vector<Node8> only_bounds(body.geometry().nodes, body.geometry().nodes + nodes);
-    body.setTime(0);
+    body.setTime(0.5);
+    const uint64_t version = body.geometry().version;
+    std::vector<Node8> only_bounds;
+    body.interpolatedBounds(1.25, only_bounds);
+    REQUIRE(only_bounds.size() == nodes);
+    CHECK(body.time() == 0.5);
+    CHECK(body.geometry().version == version);
+    CHECK(validateGeometry(*h, body.geometry()).empty());
     body.setTime(1.25);
     CHECK(std::memcmp(only_bounds.data(), body.geometry().nodes, nodes * sizeof(Node8)) == 0);
   }
@@ -604,6 +609,46 @@ TEST_CASE("rigid bodies: random poses every step", "[deform][rigid]") {
   checkRigid(scenes::randomSoup(2000, 3), 300, 0xd0d2);
 }
 
+// A lineage's drift grows by every motion even once it is large: a motion below the drift's
+// rounding still shrinks the certificates (the drift is rounded up). Here the drift reaches 1e8
+// (large accepted motions there and back), then a small triangle above a plane sinks 7e-9 a
+// step under a point 1e-7 above the plane; a state certified on the triangle must see it pass.
+TEST_CASE("deforming bodies: a large drift still counts small motions", "[deform]") {
+  Mesh mesh = scenes::gridPlane(4);
+  const VertexIndex base = static_cast<VertexIndex>(mesh.positions.size());
+  mesh.positions.push_back(Vec3(0.09, 0.09, 1e-5));
+  mesh.positions.push_back(Vec3(0.11, 0.09, 1e-5));
+  mesh.positions.push_back(Vec3(0.10, 0.11, 1e-5));
+  mesh.triangles.push_back({base, base + 1, base + 2});
+  const auto h = Hierarchy::build(mesh);
+  DeformingBody body(h);
+  body.inflate(2e6);
+  QueryStream stream(h);
+  stream.setGeometry(&body.geometry());
+  std::vector<Vec3> x = mesh.positions;
+  for (int i = 0; i < 50; ++i) {
+    std::vector<Vec3> y = x;
+    for (Vec3& v : y) v.x() += 1e6;
+    REQUIRE(body.setPositions(y).accepted);
+    REQUIRE(body.setPositions(x).accepted);
+  }
+  CHECK(body.geometry().drift >= 1e8);
+  const Vec3 p(0.1, 0.1, 1e-7);
+  CoherentState state;
+  Failures f("closestCoherent(p, CoherentState) with a drift of 1e8");
+  for (int i = 0; i <= 1500; ++i) {
+    if (i > 0) {
+      for (int k = 0; k < 3; ++k) x[base + k].z() -= 7e-9;
+      REQUIRE(body.setPositions(x).accepted);
+    }
+    const ClosestPoint c = stream.closestCoherent(p, state);
+    const BruteHit truth = bruteForceClosest(withPositions(mesh, x), p);
+    f.check(std::abs(c.distance - truth.distance) <= 1e-12 * truth.distance,
+            [&] { return "step " + std::to_string(i) + ": " + num(c.distance) + ", brute force " + num(truth.distance); });
+  }
+  CHECK(f.checks() == 1501);
+}
+
 TEST_CASE("rigid bodies: non-rigid poses throw", "[deform][rigid]") {
   const auto h = Hierarchy::build(scenes::icosphere(2));
   Eigen::Isometry3d scaled = Eigen::Isometry3d::Identity();
@@ -621,9 +666,18 @@ TEST_CASE("rigid bodies: non-rigid poses throw", "[deform][rigid]") {
   Eigen::Isometry3d good = Eigen::Isometry3d::Identity();
   good.linear() = Eigen::AngleAxisd(0.7, Vec3(1, 2, 3).normalized()).toRotationMatrix();
   good.translation() = Vec3(1, -2, 3);
+  // Off orthonormal by far less than 1e-9 and more than rounding: refused too.
+  Eigen::Isometry3d slightly_scaled = good, slightly_sheared = good;
+  slightly_scaled.linear() *= 1 + 3e-10;
+  slightly_sheared.linear()(0, 1) += 1e-11;
+  // Composed from many small rotations: orthonormal to rounding, accepted.
+  Eigen::Isometry3d composed = Eigen::Isometry3d::Identity();
+  for (int i = 0; i < 1000; ++i) composed.linear() = Eigen::AngleAxisd(0.01, Vec3(0, 0.6, 0.8)).toRotationMatrix() * composed.linear();
+  CHECK_NOTHROW(RigidBody(h, composed));
   RigidBody body(h, good);
   for (const auto& [name, pose] : std::vector<std::pair<const char*, Eigen::Isometry3d>>{
-           {"scale 1.01", scaled}, {"shear", shear}, {"mirror", mirror}, {"NaN translation", nan_translation},
+           {"scale 1.01", scaled}, {"shear", shear}, {"scale 1 + 3e-10", slightly_scaled},
+           {"shear 1e-11", slightly_sheared}, {"mirror", mirror}, {"NaN translation", nan_translation},
            {"infinite rotation entry", inf_rotation}, {"translation beyond 1e150", huge_translation}}) {
     INFO("pose: " << name);
     CHECK_THROWS_AS(RigidBody(h, pose), std::invalid_argument);
