@@ -9,10 +9,15 @@
 //   2. det = |ab x ac|^2; if det <= kDegenerate * |ab|^2 |ac|^2 (sin^2 of the largest angle; this
 //      holds for segments, points and caps) the triangle is degenerate: answer with the closest
 //      of its three segments (zero-length segments give their end point);
-//   3. if sin^2 of the largest angle < kSliver (a sliver: the Gram numerators below lose
-//      eps / sin^2 of |ap|), the projection q of p onto the plane when q lies in the triangle
-//      (edge functions n.(edge x (q - corner)) >= 0, accurate to eps / sin), else the closest
-//      of the three segments;
+//   3. if sin^2 of the smallest angle < kSliver (a thin triangle: a sliver, whose largest angle
+//      is near 180 degrees and whose Gram numerators below lose eps / sin^2 of |ap|, or a
+//      needle, two long edges and a short one, whose barycentric coordinates lose eps of |ap|
+//      divided by the short edge and then multiply the long ones), the projection q of p onto
+//      the plane when q lies in the triangle (edge functions n.(edge x (q - corner)) >= 0,
+//      accurate to eps / sin of the largest angle), else the closest of the three segments. A
+//      needle returns q as computed (its normal is accurate: the largest angle is far from
+//      180 degrees); a sliver rebuilds it from its coordinates (its normal is not: the point
+//      stays on the triangle and errs along it);
 //   otherwise Ericson's tests, first match wins, with d1 = ab.ap, d2 = ac.ap, e = bc.bp,
 //      vb = |ac|^2 d1 - (ab.ac) d2, vc = |ab|^2 d2 - (ab.ac) d1, va = det - vb - vc:
 //        vertex a   d1 <= 0 and d2 <= 0
@@ -31,10 +36,15 @@
 //
 // What is not computed exactly (\bug):
 //  - caps below kDegenerate (a largest angle within about 0.001 degree of 180) are answered by
-//    their segments, off by up to the cap's height from the plane; slivers above it go through
-//    the projection (step 3), whose error is about eps * |ap| / sin of the largest angle (at
-//    the threshold, 1e-11 of |ap|); elsewhere the error is rounding of the returned point (a
-//    few eps * |coordinates| * distance);
+//    their segments, off by up to the cap's height from the plane; thin triangles above it go
+//    through the projection (step 3), whose inside test errs by about eps * |ap| / sin of the
+//    largest angle (at the threshold, 1e-11 of |ap|), where the segments and the projection
+//    agree to that; elsewhere the error is rounding of the returned point (a few
+//    eps * |coordinates| * distance);
+//  - a needle whose short edge lies almost along its long ones is a sliver (largest angle near
+//    180 degrees): its point is rebuilt from coordinates that lose eps over the short edge, so
+//    a point near its tip can be off by about 1e-13 of the coordinates when the short edge is
+//    1e-5 of the long ones, 7e-9 at 1e-6 (measured against a 113-bit reference);
 //  - the Gram terms are fourth powers of coordinate differences: beyond about 1e75 (or below
 //    1e-75) they overflow (underflow) and the triangle is treated as degenerate (meshes are
 //    limited to sizes in [1e-50, 1e50], core/mesh.h).
@@ -52,10 +62,11 @@ namespace {
 // sin^2 of the largest angle below which a triangle is answered by its segments; 1e-10 balances
 // the two errors described above (tuned on caps against a 113-bit reference).
 constexpr double kDegenerate = 1e-10;
-// sin^2 of the largest angle below which a triangle is a sliver (a largest angle beyond about
-// 178.2 degrees): the Gram numerators lose about eps / sin^2 of |ap| there (measured: a point
-// on a sliver of sin^2 1.4e-10 answered 7.6e-7 away), so the face case is decided on the
-// projection onto the plane instead (errors of about eps / sin).
+// sin^2 of the smallest angle below which a triangle is thin (an angle below about 1.8
+// degrees): a sliver's Gram numerators lose about eps / sin^2 of |ap| (measured: a point on a
+// sliver of sin^2 1.4e-10 answered 7.6e-7 away), a needle's coordinates eps * |ap| / (short
+// edge) (a needle with a short edge of 1e-6 of its long ones answered 8.6e-9 away), so the face
+// case is decided on the projection onto the plane instead.
 constexpr double kSliver = 1e-3;
 
 // ---------------------------------------------------------------------------------------------
@@ -168,6 +179,13 @@ inline bool isDegenerate(double det, double lab, double lac) {
 // A sliver (when not degenerate): sin^2 of the largest angle below kSliver.
 inline bool isSliver(double det, double lab, double lac) { return !(det > kSliver * (lab * lac)); }
 
+// Thin (a sliver or a needle, when not degenerate): sin^2 of the smallest angle below kSliver.
+// The smallest angle lies between the longest edge (bc) and the longer of ab, ac.
+inline double thinScale(double lab, double lac, double lbc) { return lbc * (lab > lac ? lab : lac); }
+inline bool isThin(double det, double lab, double lac, double lbc) {
+  return !(det > kSliver * thinScale(lab, lac, lbc));
+}
+
 // The projection q of p onto the triangle's plane, q = p - (n.ap / n.n) n, and the edge
 // functions of q: wa = n.(bc x bq), wb = n.(ca x cq), wc = n.(ab x aq), all >= 0 when q lies in
 // the triangle (wa : wb : wc are its barycentric coordinates, as va : vb : vc are). Each is
@@ -243,25 +261,28 @@ inline double closestImpl(const Vec3& pe, const Vec3& ae, const Vec3& be, const 
   };
 
   const bool degenerate = isDegenerate(f.det, f.lab, f.lac);
-  const bool sliver = !degenerate && isSliver(f.det, f.lab, f.lac);
+  const bool thin = !degenerate && isThin(f.det, f.lab, f.lac, f.lbc);
+  const bool needle = thin && !isSliver(f.det, f.lab, f.lac);
   Projection<double> proj{};
-  if (sliver) proj = projectOnPlane(p, f);
+  if (thin) proj = projectOnPlane(p, f);
   // (Edge functions of a sliver with edges near 1e-80 underflow to 0: not inside then.)
-  const bool sliver_face = sliver && proj.wa >= 0.0 && proj.wb >= 0.0 && proj.wc >= 0.0 &&
-                           proj.wa + proj.wb + proj.wc > 0.0;
-  if (sliver_face) {
-    // The projection lies in the sliver: the closest point, from its barycentric coordinates.
+  const bool thin_face = thin && proj.wa >= 0.0 && proj.wb >= 0.0 && proj.wc >= 0.0 &&
+                         proj.wa + proj.wb + proj.wc > 0.0;
+  if (thin_face) {
+    // The projection lies in the thin triangle: the closest point, as computed for a needle
+    // (rebuilt from its coordinates it would carry their error times the long edges), from
+    // its barycentric coordinates for a sliver.
     const double s = proj.wa + proj.wb + proj.wc;  // > 0: a positive sum of three >= 0 terms
     const double v = proj.wb / s;
     const double w = proj.wc / s;
-    res.point = pointAt(f.a, v, f.ab, w, f.ac);
+    res.point = needle ? proj.q : pointAt(f.a, v, f.ab, w, f.ac);
     if (kDetails) {
       res.bary[0] = proj.wa / s;
       res.bary[1] = v;
       res.bary[2] = w;
       res.feature = kLocalFace;
     }
-  } else if (degenerate || sliver) {
+  } else if (degenerate || thin) {
     // Closest of the segments ab, bc, ac (first wins ties); a segment end is returned exactly.
     // For a sliver whose plane projection of p falls outside it, the closest point is on its
     // boundary.
@@ -509,26 +530,29 @@ inline void blockLanes(const V3<typename Ops::V>& p, const TriangleBlock8& block
   const V3<V> e1v = select3<Ops>(is_bc, f.bc, f.ab);
   V squared = squaredDistance(p, pointAt(o, v, e1v, w, f.ac));
 
-  // Thin lanes (slivers and degenerate ones; NaN too) are rare: one test for both.
+  // Thin lanes (slivers, needles and degenerate ones; NaN too) are rare: one test for all.
   const V lab_lac = f.lab * f.lac;
-  const M thin = Ops::notM(Ops::gt(f.det, Ops::set1(kSliver) * lab_lac));
+  const V thin_scale = f.lbc * Ops::select(Ops::gt(f.lab, f.lac), f.lab, f.lac);
+  const M thin = Ops::notM(Ops::gt(f.det, Ops::set1(kSliver) * thin_scale));
   if (Ops::any(thin)) {
     const M degenerate = Ops::notM(Ops::gt(f.det, Ops::set1(kDegenerate) * lab_lac));
-    const M sliver = Ops::andNot(thin, degenerate);
+    const M projected = Ops::andNot(thin, degenerate);
     const V s_ab = segmentSquared<Ops>(p, f.a, f.b, f.ab, f.d1, f.lab, f.ac);
     const V s_bc = segmentSquared<Ops>(p, f.b, f.c, f.bc, f.e, f.lbc, f.ac);
     const V s_ac = segmentSquared<Ops>(p, f.a, f.c, f.ac, f.d2, f.lac, f.ac);
     V best = s_ab;
     best = Ops::select(Ops::lt(s_bc, best), s_bc, best);
     best = Ops::select(Ops::lt(s_ac, best), s_ac, best);
-    if (Ops::any(sliver)) {  // the projection when it lies in the sliver, else its boundary
+    if (Ops::any(projected)) {  // the projection when it lies in the thin triangle, else its boundary
       const Projection<V> pr = projectOnPlane(p, f);
       const M inside = Ops::andM(Ops::ge(pr.wa, zero), Ops::andM(Ops::ge(pr.wb, zero), Ops::ge(pr.wc, zero)));
       const V s = pr.wa + pr.wb + pr.wc;
-      const V3<V> q = pointAt(f.a, pr.wb / s, f.ab, pr.wc / s, f.ac);
-      best = Ops::select(Ops::andM(Ops::andM(sliver, inside), Ops::gt(s, zero)), squaredDistance(p, q), best);
+      // A needle's projection as computed; a sliver's rebuilt from its coordinates.
+      const M needle = Ops::gt(f.det, Ops::set1(kSliver) * lab_lac);
+      const V3<V> q = select3<Ops>(needle, pr.q, pointAt(f.a, pr.wb / s, f.ab, pr.wc / s, f.ac));
+      best = Ops::select(Ops::andM(Ops::andM(projected, inside), Ops::gt(s, zero)), squaredDistance(p, q), best);
     }
-    squared = Ops::select(Ops::orM(degenerate, sliver), best, squared);
+    squared = Ops::select(Ops::orM(degenerate, projected), best, squared);
   }
   Ops::store(out + lane, squared);
 }

@@ -97,8 +97,17 @@ std::string inconsistency(const TriangleClosest& r, const Vec3& p, const Vec3& a
     return "not finite";
   if (r.barycentric.minCoeff() < 0.0) return "negative barycentric coordinate";
   if (std::abs(r.barycentric.sum() - 1.0) > 4 * kEps) return "barycentric sum is not 1";
+  // A face point of a thin triangle is its projection onto the plane, as computed; its
+  // coordinates reproduce it only to their conditioning, the longest edge over the smallest
+  // height (a needle's coordinates err by eps over the short edge, times the long ones).
+  double conditioning = 1.0;
+  if (r.feature == Feature::kFace) {
+    const double longest = std::max({(b - a).norm(), (c - b).norm(), (a - c).norm()});
+    const double twice_area = (b - a).cross(c - a).norm();
+    if (twice_area > 0) conditioning = std::max(1.0, longest * longest / twice_area);
+  }
   const Vec3 combined = r.barycentric[0] * a + r.barycentric[1] * b + r.barycentric[2] * c;
-  if ((combined - r.point).cwiseAbs().maxCoeff() > 8 * kEps * m)
+  if ((combined - r.point).cwiseAbs().maxCoeff() > 8 * kEps * m * conditioning)
     return "point != b0*a + b1*b + b2*c";
   if (std::abs(r.squared_distance - (p - r.point).squaredNorm()) > 4 * kEps * r.squared_distance)
     return "squared distance != |p - point|^2";
@@ -353,10 +362,11 @@ TEST_CASE("closest point: degenerate triangles", "[triangle_distance]") {
 }
 
 TEST_CASE("closest point: near-degenerate slivers", "[triangle_distance]") {
-  // Needles (one tiny angle, largest angle 90 degrees) are plain triangles for the algorithm;
-  // caps (largest angle near 180 degrees) are slivers below sin^2 1e-3 (decided on the
-  // projection onto their plane) and switch to segments below 1e-10 (thinness about 5e-6 here),
-  // where the answer can be off by the cap's height: only those get an absolute allowance.
+  // Needles (one tiny angle, largest angle 90 degrees) and caps (largest angle near 180
+  // degrees) are thin below sin^2 1e-3 of their smallest angle (decided on the projection onto
+  // their plane); caps switch to segments below sin^2 1e-10 of their largest angle (thinness
+  // about 5e-6 here), where the answer can be off by the cap's height: only those get an
+  // absolute allowance.
   std::mt19937_64 rng(5);
   std::uniform_real_distribution<double> u(0, 1);
   for (int k = 0; k <= 32; ++k) {
@@ -588,5 +598,65 @@ TEST_CASE("closest point: tiny slivers stay finite", "[triangle_distance]") {
     double out[8];
     squaredDistancesToBlock(p, block, out);
     CHECK(out[0] == squaredDistanceToTriangle(p, a, b, c));
+  }
+}
+
+// Needles: two long edges and a short one (short / long from 1e-3 to 1e-12), points just off
+// the plane over the needle, near its tip or anywhere along it. Their barycentric coordinates
+// lose eps * |ap| / (short edge), which the long edges multiply, so a needle's face point is
+// its projection onto the plane (an accurate normal: the largest angle is near 90 degrees).
+// Found by review: a point 1e-11 from a needle's tip was answered 6.8e-3 away. The block
+// agrees bit for bit.
+TEST_CASE("closest point: needles", "[triangle_distance]") {
+  {
+    const Vec3 a(-0.96739614839096744, -0.76718814336701169, -0.55325255795829409);
+    const Vec3 b(0.4193105400949646, 0.438351028214504, -0.43800765110134121);
+    const Vec3 c(-0.96739614838610011, -0.76718814336337771, -0.55325255795786554);
+    const Vec3 p(0.41931054009613633, 0.43835102821410477, -0.43800765111126427);
+    const double reference = referenceSquared(p, a, b, c);
+    const TriangleClosest r = closestPointOnTriangle(p, a, b, c);
+    INFO("got " << r.squared_distance << " reference " << reference);
+    CHECK(agrees(r.squared_distance, reference, maxAbs(p, a, b, c)));
+    CHECK(std::sqrt(r.squared_distance) < 1e-10);
+  }
+  std::mt19937_64 rng(0x2eed1e);
+  std::uniform_real_distribution<double> u(0, 1);
+  for (double ratio : {1e-3, 1e-5, 1e-7, 1e-9, 1e-12}) {
+    size_t failures = 0;
+    for (int i = 0; i < 500; ++i) {
+      const Eigen::Matrix3d rotation = randomRotation(rng);
+      const Vec3 shift = randomVector(rng, 2);
+      const double length = std::pow(10.0, -2 + 3 * u(rng));
+      // Tip at the origin of the local frame, base (short edge) at x = length.
+      const Vec3 tip = shift;
+      const Vec3 base0 = rotation * Vec3(length, 0, 0) + shift;
+      const Vec3 base1 = rotation * Vec3(length * (1 + ratio * (u(rng) - 0.5)), length * ratio, 0) + shift;
+      // A point over the needle (near the tip half the time), 1e-12 to 1e-3 of its length off.
+      const double along = i % 2 ? std::pow(10.0, -9 * u(rng)) : u(rng);
+      const double across = u(rng);
+      const Vec3 on = rotation * Vec3(length * along, length * ratio * along * across, 0) + shift;
+      const double off = length * std::pow(10.0, -12 + 9 * u(rng)) * (u(rng) < 0.5 ? -1 : 1);
+      const Vec3 p = on + rotation * Vec3(0, 0, off);
+      const Vec3 corners[3] = {tip, base0, base1};
+      const int first = i % 3;  // every labelling
+      const Vec3 &a = corners[first], &b = corners[(first + 1) % 3], &c = corners[(first + 2) % 3];
+      const TriangleClosest r = closestPointOnTriangle(p, a, b, c);
+      const double reference = referenceSquared(p, a, b, c);
+      const bool ok = agrees(r.squared_distance, reference, maxAbs(p, a, b, c));
+      failures += !ok;
+      if (!ok && failures <= 3) {
+        INFO("ratio " << ratio << " " << describe(p, a, b, c) << " got " << r.squared_distance << " reference "
+                      << reference);
+        CHECK(ok);
+      }
+      CHECK_CONSISTENT(r, p, a, b, c, "needle ratio " << ratio);
+      TriangleBlock8 block;
+      for (int lane = 0; lane < 8; ++lane) setLane(block, lane, a, b, c);
+      double out[8];
+      squaredDistancesToBlock(p, block, out);
+      CHECK(out[0] == r.squared_distance);
+    }
+    INFO("ratio " << ratio);
+    CHECK(failures == 0);
   }
 }
