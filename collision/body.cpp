@@ -151,15 +151,31 @@ std::shared_ptr<const BodyShape> BodyShape::build(std::shared_ptr<const Hierarch
     }
   }
 
-  // Rest pseudonormals. A zero-area face has no normal: its pseudonormals would not decide the
-  // sign, so a mesh with one is treated as open (unsigned answers, never a wrong sign).
+  // Rest pseudonormals. A degenerate face (one the exact distance answers by its segments: zero
+  // area, or a cap within about 0.001 degree of 180) has no reliable normal, and where it is
+  // closest the feature is decided by rounding: its pseudonormals would not decide the sign, so
+  // a mesh with one is treated as open (unsigned answers, never a wrong sign).
   const auto& pos = mesh.positions;
   shape->face_normals_.resize(face_count);
   for (size_t f = 0; f < face_count; ++f) {
     const Triangle& t = mesh.triangles[f];
     shape->face_normals_[f] = unitFaceNormal(pos[t[0]], pos[t[1]], pos[t[2]]);
-    if (reason.empty() && shape->face_normals_[f].squaredNorm() == 0)
-      reason = "face " + std::to_string(f) + " has zero area";
+    if (reason.empty() && isDegenerateTriangle(pos[t[0]], pos[t[1]], pos[t[2]]))
+      reason = "face " + std::to_string(f) +
+               (shape->face_normals_[f].squaredNorm() == 0 ? " has zero area"
+                                                            : " is degenerate (an angle within 0.001 degree of 180)");
+  }
+  // Orientation: a closed surface whose faces point inward encloses a negative volume (summed
+  // over the faces, about the box's centre). It is the same solid: its normals are flipped, so
+  // that signs still say inside and outside. One enclosing no volume has no inside.
+  if (reason.empty()) {
+    const Vec3 o = 0.5 * (shape->rest_lower_ + shape->rest_upper_);
+    double volume6 = 0;
+    for (const Triangle& t : mesh.triangles)
+      volume6 += (pos[t[0]] - o).dot((pos[t[1]] - o).cross(pos[t[2]] - o));
+    if (!(volume6 != 0)) reason = "the surface encloses no volume";
+    shape->orientation_ = volume6 < 0 ? -1.0 : 1.0;
+    for (Vec3& n : shape->face_normals_) n *= shape->orientation_;
   }
   shape->closed_ = reason.empty();
   shape->open_reason_ = reason;
@@ -198,6 +214,10 @@ void BodyShape::prefetchRestPseudonormal(TriangleIndex triangle, Feature feature
 }
 
 Vec3 BodyShape::pseudonormal(TriangleIndex triangle, Feature feature, const Vec3* positions) const {
+  return orientation_ * pseudonormalAsGiven(triangle, feature, positions);
+}
+
+Vec3 BodyShape::pseudonormalAsGiven(TriangleIndex triangle, Feature feature, const Vec3* positions) const {
   const Mesh& m = mesh();
   const Triangle& t = m.triangles[triangle];
   if (feature == Feature::kFace) return unitFaceNormal(positions[t[0]], positions[t[1]], positions[t[2]]);

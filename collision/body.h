@@ -5,10 +5,13 @@
 //
 //  - Surface topology: [vertex] incident faces (CSR), [triangle edge] the face across the edge,
 //    and whether the mesh is closed (every edge has exactly two faces, used in opposite
-//    directions; every vertex's faces form one fan; no face repeats a vertex or has zero area
-//    at the rest positions). Only closed bodies get a sign (inside/outside); the sign of a
-//    deformed closed body assumes the deformation keeps it free of self-intersections and
-//    zero-area faces (the pseudonormal test's precondition).
+//    directions; every vertex's faces form one fan; no face repeats a vertex or is degenerate
+//    (isDegenerateTriangle) at the rest positions; the surface encloses a volume). Only closed
+//    bodies get a sign (inside/outside). A closed surface whose faces point inward (a negative
+//    enclosed volume) is the same solid: its pseudonormals are flipped (inward()). Signs
+//    assume an embedded surface: no self-intersections or overlapping components (not
+//    checked), at the rest positions and through any deformation, which must also keep its
+//    faces from degenerating (the pseudonormal test's precondition).
 //  - Angle-weighted pseudonormals at the rest positions (Baerentzen & Aanaes, "Signed distance
 //    computation using the angle weighted pseudonormal", IEEE TVCG 2005): the face normal; for
 //    an edge the sum of its two unit face normals; for a vertex the sum of the unit normals of
@@ -38,6 +41,8 @@ class BodyShape {
   bool closed() const { return closed_; }
   // Why the mesh is not closed (the first problem found), "" when closed.
   const std::string& openReason() const { return open_reason_; }
+  // A closed mesh whose faces point inward: every pseudonormal is flipped (see the file comment).
+  bool inward() const { return orientation_ < 0; }
 
   // Box of the vertices used by faces, at the rest positions.
   const Vec3& restLower() const { return rest_lower_; }
@@ -50,7 +55,8 @@ class BodyShape {
   // kInvalidIndex on a boundary or non-manifold edge.
   const std::vector<TriangleIndex>& edgeNeighbor() const { return edge_neighbor_; }
 
-  // Rest pseudonormals: [triangle] unit face normal (zero for a zero-area face);
+  // Rest pseudonormals (flipped for an inward mesh): [triangle] unit face normal (zero for a
+  // zero-area face);
   // [3 * triangle + edge] edge pseudonormal; [vertex] vertex pseudonormal. Not normalised
   // except the face normals; only their directions matter.
   const std::vector<Vec3>& restFaceNormals() const { return face_normals_; }
@@ -73,6 +79,9 @@ class BodyShape {
   BodyShape() = default;
   // The table entry restPseudonormal() returns.
   const Vec3& restPseudonormalEntry(TriangleIndex triangle, Feature feature) const;
+  // pseudonormal() for the faces' own orientation.
+  Vec3 pseudonormalAsGiven(TriangleIndex triangle, Feature feature, const Vec3* positions) const;
+  double orientation_ = 1;  // -1: faces point inward, normals flipped
   std::shared_ptr<const Hierarchy> hierarchy_;
   bool closed_ = false;
   std::string open_reason_;

@@ -570,6 +570,20 @@ double squaredDistanceToTriangle(const Vec3& p, const Vec3& a, const Vec3& b, co
   return closestImpl<false>(p, a, b, c, nullptr);
 }
 
+bool isDegenerateTriangle(const Vec3& ae, const Vec3& be, const Vec3& ce) {
+  // The rotation and determinant of closestImpl: a opposite the longest edge.
+  const V3<double> corner[3] = {{ae.x(), ae.y(), ae.z()}, {be.x(), be.y(), be.z()}, {ce.x(), ce.y(), ce.z()}};
+  const V3<double> e0 = corner[1] - corner[0];
+  const V3<double> e1 = corner[2] - corner[1];
+  const V3<double> e2 = corner[0] - corner[2];
+  const double l[3] = {dot(e0, e0), dot(e1, e1), dot(e2, e2)};
+  const int r = (l[1] >= l[2] && l[1] >= l[0]) ? 0 : (l[2] >= l[0] ? 1 : 2);
+  const V3<double> ab = corner[(r + 1) % 3] - corner[r];
+  const V3<double> ac = corner[(r + 2) % 3] - corner[r];
+  const V3<double> n = cross(ab, ac);
+  return isDegenerate(dot(n, n), l[r], l[(r + 2) % 3]);
+}
+
 void squaredDistancesToBlock(const Vec3& p, const TriangleBlock8& block, double out[8]) {
   using V = BlockOps::V;
   const V3<V> pv{BlockOps::set1(p.x()), BlockOps::set1(p.y()), BlockOps::set1(p.z())};

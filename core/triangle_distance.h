@@ -22,6 +22,11 @@ TriangleClosest closestPointOnTriangle(const Vec3& p, const Vec3& a, const Vec3&
 // (relative 1e-14) and is cheaper.
 double squaredDistanceToTriangle(const Vec3& p, const Vec3& a, const Vec3& b, const Vec3& c);
 
+// True when the functions above answer the triangle by its three segments: sin^2 of its
+// largest angle at most 1e-10 (a segment, a point, or a cap within about 0.001 degree of 180),
+// or a coordinate that is not finite. Such a triangle has no reliable normal.
+bool isDegenerateTriangle(const Vec3& a, const Vec3& b, const Vec3& c);
+
 // Eight triangles stored structure-of-arrays for testing several at a time:
 // v[corner][axis][lane]. Unused lanes must hold a copy of a used lane (never garbage).
 struct alignas(64) TriangleBlock8 {
