@@ -53,7 +53,8 @@ struct HausdorffOptions {
   double tolerance = 0;
   // Otherwise the tolerance is relative_tolerance times the bounding-box diagonal of A.
   double relative_tolerance = 1e-4;
-  // Worker threads: 0 = all (TBB's default). The result does not depend on this number.
+  // Worker threads: 0 = all (TBB's default); at most 4096 are used. The result does not
+  // depend on this number.
   unsigned threads = 0;
   // Symmetric only: refine both directions until each one-sided interval meets the tolerance
   // (by default the dominated direction stops as soon as it provably cannot change H).

@@ -415,7 +415,7 @@ std::string checkObjFaces(const std::string& text) {
 // string when nothing is found.
 std::string diagnoseObj(std::istream& in) {
   static const char* const kKnown[] = {
-      "v", "vt", "vn", "f", "vp", "bevel", "lod", "ctech", "c_interp", "usemap", "usemtl",
+      "v", "vt", "vn", "f", "l", "vp", "bevel", "lod", "ctech", "c_interp", "usemap", "usemtl",
       "stech", "d_interp", "mtllib", "shadow_obj", "trace_obj", "o", "g", "s", "p", "cstype",
       "deg", "step", "bmat", "con", "curv", "curv2", "surf", "parm", "trim", "hole", "scrv", "sp",
       "end", "surf_1", "q0_1", "q1_1", "curv2d_1", "surf_2", "q0_2", "q1_2", "curv2d_2", "bsp",
@@ -903,6 +903,16 @@ Mesh readMesh(const std::string& path) {
     if (in.bad()) fail(path, "read error");
     for (char& c : text)
       if (isBlank(c) && c != '\r') c = ' ';
+    // Line elements ('l', polylines of an exporter's loose edges) are not faces, and CGAL's
+    // reader refuses them: they become comments (line numbers kept).
+    for (size_t at = 0; at < text.size();) {
+      size_t first = at;
+      while (first < text.size() && text[first] == ' ') ++first;
+      if (first + 1 < text.size() && text[first] == 'l' && (text[first + 1] == ' ' || text[first + 1] == '\n' || text[first + 1] == '\r'))
+        text[first] = '#';
+      const size_t end = text.find('\n', at);
+      at = end == std::string::npos ? text.size() : end + 1;
+    }
     const std::string problem = checkObjFaces(text);
     if (!problem.empty()) fail(path, problem);
     obj_text.str(std::move(text));

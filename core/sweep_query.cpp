@@ -827,6 +827,9 @@ ClosestPoint QueryStream::closestWithin(const Vec3& p, double tolerance) {
   const TreeGeometry& g = geometry();
   counters_ = {};
   if (!inCoordinateRange(p, kMaxQueryCoordinate)) return unanswerable();
+  // An exact answer is the depth-first query's: the same answer, without the heap (about three
+  // times faster).
+  if (!(tolerance > 0)) return closest(p);
   const ScaledPoint sp = scalePoint(g, p);
   const double inv_scale = 1.0 / g.box_scale;
   const TriangleIndex* lanes = h.leafTriangles().data();

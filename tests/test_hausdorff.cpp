@@ -465,6 +465,12 @@ TEST_CASE("1 and 2 threads give identical results") {
   requireIdentical(one.b_to_a, two.b_to_a);
   CHECK(one.lower == two.lower);
   CHECK(one.upper == two.upper);
+  // Absurd thread counts are capped (TBB crashed from 65536 threads on).
+  for (unsigned threads : {70000u, 4000000000u}) {
+    const HausdorffResult many = hausdorff(a, b, absolute(1e-4, threads));
+    CHECK(many.lower == one.lower);
+    CHECK(many.upper == one.upper);
+  }
 }
 
 TEST_CASE("bad input: clear errors") {

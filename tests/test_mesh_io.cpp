@@ -208,6 +208,7 @@ TEST_CASE("OBJ: order kept, v/vt/vn faces, negative indices, ignored statements"
                                                     "v 0 1 0\n"
                                                     "vt 0 0\nvn 0 0 1\n"
                                                     "g group\ns off\nusemtl x\n"
+                                                    "l 1 2\n  l 2 3 4\n"  // line elements: not faces
                                                     "f 1/1/1 2/1/1 3/1/1 4/1/1\n"
                                                     "f -1 -2 -4\n"
                                                     "f 1//1 3//1 4//1\n"));
@@ -350,8 +351,8 @@ TEST_CASE("readMesh refuses garbage in every format", "[mesh_io]") {
              Contains("SKEL"));
   CHECK_THAT(readError(dir.write("noedges.off", "OFF\n3 1\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n")),
              Contains("no edge count"));
-  CHECK_THAT(readError(dir.write("bad.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nl 1 2\nf 1 2 3\n")),
-             Contains("line 4") && Contains("'l'"));
+  CHECK_THAT(readError(dir.write("bad.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nedge 1 2\nf 1 2 3\n")),
+             Contains("line 4") && Contains("'edge'"));
   CHECK_THAT(readError(dir.write("short.obj", "v 0 0 0\nv 1 0\nv 0 1 0\nf 1 2 3\n")),
              Contains("line 2") && Contains("fewer than 3"));
   CHECK_THAT(readError(dir.write("bad.stl", "solid x\nfacet normal 0 0 1\nouter loop\n"
