@@ -410,6 +410,53 @@ std::string checkObjFaces(const std::string& text) {
   return {};
 }
 
+// Appends the k - 2 triangles of one polygon face (corners as a ring, changed here). When the
+// fan (c0,c1,c2), (c0,c2,c3), ... is right (each of its triangles turns the polygon's way
+// about its Newell normal: c0 sees the whole polygon, as in any convex one) it is the
+// triangulation, in that documented order. Otherwise the polygon is cut into ears in the plane
+// of its Newell normal, so a planar polygon is covered exactly (that fan would cover area
+// outside it). A polygon with no ear to cut
+// (self-intersecting, far from planar), or a non-convex one of more than 1024 corners (ear
+// cutting is cubic here), has no one right answer: the rest is fanned.
+void triangulatePolygon(const std::vector<Vec3>& x, std::vector<VertexIndex>& ring, std::vector<Triangle>& out) {
+  const std::size_t k = ring.size();
+  auto fan = [&] {
+    for (std::size_t j = 1; j + 1 < ring.size(); ++j) out.push_back({ring[0], ring[j], ring[j + 1]});
+  };
+  if (k == 3) return fan();
+  const Vec3& origin = x[ring[0]];
+  Vec3 normal = Vec3::Zero();  // Newell: twice the polygon's vector area
+  for (std::size_t i = 0; i < k; ++i) normal += (x[ring[i]] - origin).cross(x[ring[(i + 1) % k]] - origin);
+  auto turn = [&](VertexIndex a, VertexIndex b, VertexIndex c) { return (x[b] - x[a]).cross(x[c] - x[b]).dot(normal); };
+  // The fan is right when every one of its triangles turns the polygon's way (c0 sees the
+  // whole polygon: convex ones, and many others).
+  bool fan_ok = true;
+  for (std::size_t j = 1; j + 1 < k && fan_ok; ++j) fan_ok = !(turn(ring[0], ring[j], ring[j + 1]) < 0);
+  if (fan_ok || !(normal.squaredNorm() > 0) || k > 1024) return fan();
+  auto inside = [&](VertexIndex q, VertexIndex a, VertexIndex b, VertexIndex c) {  // closed triangle, along the normal
+    return turn(a, b, q) >= 0 && turn(b, c, q) >= 0 && turn(c, a, q) >= 0;
+  };
+  while (ring.size() > 3) {
+    const std::size_t n = ring.size();
+    bool cut = false;
+    for (std::size_t i = 0; i < n && !cut; ++i) {
+      const VertexIndex a = ring[(i + n - 1) % n], b = ring[i], c = ring[(i + 1) % n];
+      if (!(turn(a, b, c) > 0)) continue;  // reflex or flat: not an ear
+      bool empty = true;
+      for (std::size_t j = 0; j < n && empty; ++j) {
+        const VertexIndex q = ring[j];
+        if (q != a && q != b && q != c) empty = !inside(q, a, b, c);
+      }
+      if (!empty) continue;
+      out.push_back({a, b, c});
+      ring.erase(ring.begin() + static_cast<std::ptrdiff_t>(i));
+      cut = true;
+    }
+    if (!cut) break;
+  }
+  fan();
+}
+
 // Called when CGAL rejected an OBJ file: finds the line it stopped at, the way its read_OBJ
 // reads (one statement per line; statements it does not know make it fail). Returns an empty
 // string when nothing is found.
@@ -972,12 +1019,10 @@ Mesh readMesh(const std::string& path) {
   }
   if (triangle_count == 0) fail(path, "the file has no faces");
   mesh.triangles.reserve(triangle_count);
-  for (const Corners& corners : polygons) {  // fan: (c0,c1,c2), (c0,c2,c3), ...
-    for (std::size_t k = 1; k + 1 < corners.size(); ++k) {
-      mesh.triangles.push_back({static_cast<VertexIndex>(corners[0]),
-                                static_cast<VertexIndex>(corners[k]),
-                                static_cast<VertexIndex>(corners[k + 1])});
-    }
+  std::vector<VertexIndex> ring;
+  for (const Corners& corners : polygons) {
+    ring.assign(corners.begin(), corners.end());
+    triangulatePolygon(mesh.positions, ring, mesh.triangles);
   }
   const std::string problem = checkMesh(mesh);
   if (!problem.empty()) throw MeshError(problem);

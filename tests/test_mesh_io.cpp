@@ -1,5 +1,6 @@
 // Tests for core/mesh_io: readMesh on small hand-written files of every format (order kept, fan
 // triangulation, valid oddities) and on every kind of bad input; readPoints; writeOff.
+#include "core/brute_force.h"
 #include "core/mesh_io.h"
 
 #include <catch2/catch.hpp>
@@ -249,6 +250,30 @@ TEST_CASE("ASCII PLY: order kept, extra properties skipped, polygons fan-triangu
   CHECK(mesh.positions[4] == Vec3(0.5, 0.5, 0.25));
   const std::vector<Triangle> expected = {{0, 1, 2}, {0, 2, 3}, {4, 3, 2}};
   CHECK(mesh.triangles == expected);
+}
+
+// A non-convex polygon whose first corner does not see all of it: the fan from that corner would
+// cover area outside it (found by review: corner_poly.off read as overlapping triangles, whose
+// distances and signs were wrong). It is cut into ears instead; a polygon its first corner
+// sees whole keeps the fan.
+TEST_CASE("polygons: the fan where it is right, ears where it is not", "[mesh_io]") {
+  TempDir dir;
+  // An L (area 3) listed from (2, 1), next to its reflex corner (1, 1): the fan's first
+  // triangle (2,1), (1,1), (1,2) lies outside it.
+  const Mesh l_shape = meshsweeper::readMesh(dir.write("l.off", "OFF\n6 1 0\n2 1 0\n1 1 0\n1 2 0\n0 2 0\n0 0 0\n2 0 0\n6 0 1 2 3 4 5\n"));
+  REQUIRE(l_shape.triangles.size() == 4);
+  double area = 0;
+  for (const Triangle& t : l_shape.triangles) {
+    const Vec3 n = (l_shape.positions[t[1]] - l_shape.positions[t[0]]).cross(l_shape.positions[t[2]] - l_shape.positions[t[0]]);
+    area += 0.5 * n.norm();
+    CHECK(n.z() > 0);  // the polygon's orientation kept
+  }
+  CHECK(area == Approx(3.0).epsilon(1e-15));
+  CHECK(bruteForceClosest(l_shape, Vec3(1.3, 1.3, 0)).distance == Approx(0.3).epsilon(1e-12));
+  // The same L listed from a corner that sees it whole: the fan, in order.
+  const Mesh fanned = meshsweeper::readMesh(dir.write("l2.off", "OFF\n6 1 0\n0 0 0\n2 0 0\n2 1 0\n1 1 0\n1 2 0\n0 2 0\n6 0 1 2 3 4 5\n"));
+  const std::vector<Triangle> fan = {{0, 1, 2}, {0, 2, 3}, {0, 3, 4}, {0, 4, 5}};
+  CHECK(fanned.triangles == fan);
 }
 
 TEST_CASE("binary PLY, little and big endian, float and double coordinates", "[mesh_io]") {
