@@ -3,16 +3,20 @@
 // Usage: service_example MESH [STEPS]
 // Two rigid copies of MESH share one hierarchy; a third copy deforms freely. Every step moves the
 // bodies, moves the sheet down a little and asks for the closest hit within 2% of the diagonal.
-// Built with the project (tools/CMakeLists.txt).
+// Built with the project (tools/CMakeLists.txt) and by the install check (examples/CMakeLists.txt
+// through find_package), so it stays in step with the API.
 #include "collision/distance_service.h"
 #include "core/mesh_io.h"
 
 #include <Eigen/Geometry>
 
 #include <algorithm>
+#include <cctype>
+#include <cerrno>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
+#include <limits>
 #include <stdexcept>
 
 int main(int argc, char** argv) {
@@ -21,9 +25,22 @@ int main(int argc, char** argv) {
     std::fprintf(stderr, "usage: service_example MESH [STEPS]\n");
     return 2;
   }
+  // STEPS is checked whole: atoi would read "abc" or "-3" as 0 or less and run no step at all.
+  int steps = 20;
+  if (argc == 3) {
+    const char* text = argv[2];
+    char* end = nullptr;
+    errno = 0;
+    const long long value = std::strtoll(text, &end, 10);
+    if (!std::isdigit(static_cast<unsigned char>(text[0])) || *end != '\0' || errno == ERANGE ||
+        value < 1 || value > std::numeric_limits<int>::max()) {
+      std::fprintf(stderr, "service_example: STEPS must be a positive integer (got '%s')\n", text);
+      return 2;
+    }
+    steps = static_cast<int>(value);
+  }
   try {
     const Mesh mesh = readMesh(argv[1]);
-    const int steps = argc == 3 ? std::atoi(argv[2]) : 20;
     Vec3 lower, upper;
     meshBounds(mesh, lower, upper);
     const double diagonal = (upper - lower).norm();

@@ -7,6 +7,7 @@
 #include "scenes/procedural.h"
 #include "scenes/render.h"
 #include "scenes/scene_demos.h"
+#include "tools/bound_text.h"
 
 #include <algorithm>
 #include <array>
@@ -66,6 +67,11 @@ std::string format(const char* pattern, double value) {
   return text;
 }
 
+// A certified bound with `digits` significant digits, rounded outward as `meshsweep hausdorff`
+// prints them.
+std::string lowerText(double x, int digits) { return cli::outwardBound(x, digits, false); }
+std::string upperText(double x, int digits) { return cli::outwardBound(x, digits, true); }
+
 }  // namespace
 
 std::string hausdorffScene(const std::string& out_dir, std::FILE* log) {
@@ -91,18 +97,22 @@ std::string hausdorffScene(const std::string& out_dir, std::FILE* log) {
   HausdorffOptions options;
   options.relative_tolerance = 1e-4;
   const HausdorffResult result = hausdorff(simplified, original, options);
+  // Certified bounds (and their percentages) are shown rounded outward, lower down and upper
+  // up, so the printed intervals still contain the distances.
   std::fprintf(log,
-               "hausdorff: H(simplified, original) in [%.6g, %.6g] (%.4f%% .. %.4f%% of the "
+               "hausdorff: H(simplified, original) in [%s, %s] (%s%% .. %s%% of the "
                "diagonal %.4g), converged %s\n"
-               "hausdorff:   h(simplified -> original) in [%.6g, %.6g], mean %.4g\n"
-               "hausdorff:   h(original -> simplified) in [%.6g, %.6g], mean %.4g\n"
+               "hausdorff:   h(simplified -> original) in [%s, %s], mean %.4g\n"
+               "hausdorff:   h(original -> simplified) in [%s, %s], mean %.4g\n"
                "hausdorff:   %llu point queries, %.2f s (hierarchies %.2f s)\n",
-               result.lower, result.upper, 100 * result.lower / diagonal,
-               100 * result.upper / diagonal, diagonal, result.converged ? "yes" : "no",
-               result.a_to_b.lower, result.a_to_b.upper, result.a_to_b.mean,
-               result.b_to_a.lower, result.b_to_a.upper, result.b_to_a.mean,
-               static_cast<unsigned long long>(result.counters.queries), result.seconds,
-               result.build_seconds);
+               lowerText(result.lower, 6).c_str(), upperText(result.upper, 6).c_str(),
+               cli::outwardFixed(100 * result.lower / diagonal, 4, false).c_str(),
+               cli::outwardFixed(100 * result.upper / diagonal, 4, true).c_str(), diagonal,
+               result.converged ? "yes" : "no", lowerText(result.a_to_b.lower, 6).c_str(),
+               upperText(result.a_to_b.upper, 6).c_str(), result.a_to_b.mean,
+               lowerText(result.b_to_a.lower, 6).c_str(), upperText(result.b_to_a.upper, 6).c_str(),
+               result.b_to_a.mean, static_cast<unsigned long long>(result.counters.queries),
+               result.seconds, result.build_seconds);
 
   // The original's vertices, coloured by their exact distance to the simplification.
   const std::vector<double>& distance = result.b_to_a.vertex_distance;
@@ -137,9 +147,10 @@ std::string hausdorffScene(const std::string& out_dir, std::FILE* log) {
                       std::to_string(simplified.triangles.size()) + " triangles)",
                   black, 2);
   canvas.drawText(10, 36,
-                  "certified Hausdorff H in [" + format("%.5g", result.lower) + ", " +
-                      format("%.5g", result.upper) + "] = " +
-                      format("%.3f", 100 * result.upper / diagonal) + "% of the diagonal",
+                  "certified Hausdorff H in [" + lowerText(result.lower, 5) + ", " +
+                      upperText(result.upper, 5) + "] = " +
+                      cli::outwardFixed(100 * result.upper / diagonal, 3, true) +
+                      "% of the diagonal",
                   black, 2);
   canvas.drawText(2 * panel + 10, title_height + 8, "distance", black, 2);
   canvas.drawColourBar(2 * panel + 20, title_height + 40, 2 * panel + 50,

@@ -1,5 +1,6 @@
 #include "tools/cli.h"
 
+#include <cctype>
 #include <cerrno>
 #include <cmath>
 #include <cstdarg>
@@ -27,7 +28,13 @@ Args::Args(const char* command, int argc, char** argv, int first,
   bool options_done = false;
   for (int i = first; i < argc; ++i) {
     const std::string arg = argv[i];
-    if (options_done || arg.size() < 2 || arg[0] != '-') {
+    // A negative number ("-5") is an argument, not an option, so that a bad count or
+    // coordinate is reported for what it is rather than as an unknown option.
+    const bool negative_number =
+        arg.size() >= 2 && arg[0] == '-' && (std::isdigit(static_cast<unsigned char>(arg[1])) ||
+                                             (arg[1] == '.' && arg.size() >= 3 &&
+                                              std::isdigit(static_cast<unsigned char>(arg[2]))));
+    if (options_done || arg.size() < 2 || arg[0] != '-' || negative_number) {
       positional_.push_back(arg);
       continue;
     }
@@ -95,11 +102,13 @@ uint64_t parseInteger(const std::string& text, const std::string& what, uint64_t
                       uint64_t max) {
   const std::string range = "an integer in [" + std::to_string(min) + ", " +
                             std::to_string(max) + "]";
-  if (text.empty() || text.size() > 19 ||
-      text.find_first_not_of("0123456789") != std::string::npos)
+  if (text.empty() || text.find_first_not_of("0123456789") != std::string::npos)
     throw UsageError(what + " must be " + range + " (got '" + text + "')");
+  // Digits only, so strtoull sees no sign; ERANGE past 2^64 - 1 (which itself is accepted).
+  errno = 0;
   const uint64_t x = std::strtoull(text.c_str(), nullptr, 10);
-  if (x < min || x > max) throw UsageError(what + " must be " + range + " (got " + text + ")");
+  if (errno == ERANGE || x < min || x > max)
+    throw UsageError(what + " must be " + range + " (got " + text + ")");
   return x;
 }
 

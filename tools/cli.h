@@ -42,8 +42,9 @@ struct OptionSpec {
 class Args {
  public:
   // Parses argv[first..argc). Options may appear anywhere; "--" ends options; "-" alone is a
-  // positional argument (standard input). Throws UsageError on an unknown option, a repeated
-  // option, or an option missing its value. `command` names the subcommand in messages.
+  // positional argument (standard input), and so is a negative number ("-5", "-.5"). Throws
+  // UsageError on an unknown option, a repeated option, or an option missing its value.
+  // `command` names the subcommand in messages.
   Args(const char* command, int argc, char** argv, int first, const std::vector<OptionSpec>& specs);
 
   const std::vector<std::string>& positional() const { return positional_; }

@@ -28,7 +28,8 @@ const char kClosestHelp[] =
     "  --path          the points are consecutive samples of one moving point: answer them\n"
     "                  with one coherent stream (closest: the certified candidate set;\n"
     "                  --tolerance and --k: the paper's dynamic front). Same answers, less\n"
-    "                  work per point; the summary adds the coherence counters\n"
+    "                  work per point; the summary adds the coherence counters. Not with\n"
+    "                  --within\n"
     "\n"
     "CSV columns (header line first):\n"
     "  point,rank,distance,lower,upper,triangle,x,y,z,b0,b1,b2\n"
@@ -114,6 +115,9 @@ int runClosest(int argc, char** argv, int first) {
   if (modes > 1)
     throw UsageError("closest: --tolerance, --k and --within cannot be combined");
   const bool path = args.has("--path");
+  // This tool answers --within with plain within() only: --path would be silently ignored.
+  if (path && mode == Mode::kWithin)
+    throw UsageError("closest: --path cannot be combined with --within");
 
   const Mesh mesh = readMesh(mesh_path);
   const std::vector<Vec3> points = readPoints(points_path);

@@ -2,6 +2,7 @@
 // a Metro-like summary, optional JSON and a per-vertex colour map of A.
 #include "core/hausdorff.h"
 #include "core/mesh_io.h"
+#include "tools/bound_text.h"
 #include "tools/commands.h"
 
 #include <Eigen/Geometry>
@@ -9,6 +10,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <filesystem>
 #include <limits>
 #include <memory>
 #include <string>
@@ -41,7 +43,8 @@ const char kHausdorffHelp[] =
     "  --json FILE      write the result as JSON to FILE ('-': standard output, the summary then\n"
     "                   goes to standard error)\n"
     "  --colors FILE    write A as an ASCII PLY with per-vertex 'quality' (distance to B) and\n"
-    "                   red/green/blue on a blue (0) to red (largest vertex distance) ramp\n"
+    "                   red/green/blue on a blue (0) to red (largest vertex distance) ramp;\n"
+    "                   not to the destination of --json\n"
     "\n"
     "JSON keys: a, b {path, vertices, triangles, diagonal, area}; a_to_b, b_to_a {lower, upper,\n"
     "at [x,y,z], at_triangle, closest [x,y,z], closest_triangle, mean, rms, samples, queries,\n"
@@ -55,21 +58,19 @@ namespace {
 
 double percent(double value, double diagonal) { return diagonal > 0 ? 100 * value / diagonal : 0; }
 
-// x with 7 significant digits, rounded down (up = false) or up, so that a printed certified
-// interval still contains the value.
-std::string bound7(double x, bool up) {
-  if (!std::isfinite(x)) return x > 0 ? "inf" : (x < 0 ? "-inf" : "nan");
-  char text[32];
-  double y = x;
-  for (int attempt = 0; attempt < 4; ++attempt) {
-    std::snprintf(text, sizeof text, "%.7g", y);
-    const double shown = std::strtod(text, nullptr);
-    if (up ? shown >= x : shown <= x) break;
-    // One unit of the 7th digit beyond the rounded value, in the needed direction.
-    const double unit = shown == 0 ? std::abs(x) : std::pow(10.0, std::floor(std::log10(std::abs(shown))) - 6);
-    y = up ? shown + unit : shown - unit;
-  }
-  return text;
+bool isStandardOutput(const std::string& path) { return path.empty() || path == "-"; }
+
+// Whether two output paths are one destination: both standard output, the same existing file
+// under two names, or one new file reached two ways ("r.json", "./r.json").
+bool sameDestination(const std::string& a, const std::string& b) {
+  if (isStandardOutput(a) || isStandardOutput(b)) return isStandardOutput(a) == isStandardOutput(b);
+  if (a == b) return true;
+  namespace fs = std::filesystem;
+  std::error_code error_a, error_b;
+  if (fs::equivalent(a, b, error_a)) return true;
+  const fs::path canonical_a = fs::weakly_canonical(fs::absolute(a, error_a), error_a);
+  const fs::path canonical_b = fs::weakly_canonical(fs::absolute(b, error_b), error_b);
+  return !error_a && !error_b && canonical_a == canonical_b;
 }
 
 std::string jsonNumber(double x) {
@@ -138,8 +139,10 @@ void writeColors(Output& out, const Mesh& mesh, const std::vector<double>& dista
 // One direction of the summary.
 void printDirection(std::FILE* s, const char* name, const OneSidedHausdorff& h, double diagonal,
                     double tolerance, const char* from, const char* to) {
-  std::fprintf(s, "  %s  max in [%s, %s]  (%.5f%% .. %.5f%% of diagonal)\n", name, bound7(h.lower, false).c_str(),
-               bound7(h.upper, true).c_str(), percent(h.lower, diagonal), percent(h.upper, diagonal));
+  std::fprintf(s, "  %s  max in [%s, %s]  (%s%% .. %s%% of diagonal)\n", name,
+               outwardBound(h.lower, 7, false).c_str(), outwardBound(h.upper, 7, true).c_str(),
+               outwardFixed(percent(h.lower, diagonal), 5, false).c_str(),
+               outwardFixed(percent(h.upper, diagonal), 5, true).c_str());
   std::fprintf(s, "          mean %.7g  RMS %.7g  (%.5f%%, %.5f%%; estimates)\n", h.mean, h.rms,
                percent(h.mean, diagonal), percent(h.rms, diagonal));
   std::fprintf(s, "          lower bound at (%.9g, %.9g, %.9g) on %s triangle %u,\n", h.at.x(),
@@ -182,8 +185,13 @@ int runHausdorff(int argc, char** argv, int first) {
   if (args.has("--threads"))
     options.threads = static_cast<unsigned>(args.integer("--threads", 0, 4096));
   options.tighten_both = args.has("--both");
-  const bool json_to_stdout =
-      args.has("--json") && (args.value("--json") == "-" || args.value("--json").empty());
+  const bool json_to_stdout = args.has("--json") && isStandardOutput(args.value("--json"));
+  // Both are written at the end, the PLY last: one path for both would silently lose the JSON.
+  if (args.has("--json") && args.has("--colors") &&
+      sameDestination(args.value("--json"), args.value("--colors")))
+    throw UsageError("hausdorff: --json and --colors cannot write to the same " +
+                     (json_to_stdout ? std::string("standard output")
+                                     : "file '" + args.value("--colors") + "'"));
 
   const Mesh a = readMesh(a_path);
   const Mesh b = readMesh(b_path);
@@ -225,9 +233,10 @@ int runHausdorff(int argc, char** argv, int first) {
                percent(r.tolerance, diagonal));
   printDirection(s, "A -> B", r.a_to_b, diagonal, r.tolerance, "A", "B");
   printDirection(s, "B -> A", r.b_to_a, diagonal, r.tolerance, "B", "A");
-  std::fprintf(s, "\n  Hausdorff distance in [%s, %s]  (%.5f%% .. %.5f%% of diagonal)%s\n",
-               bound7(r.lower, false).c_str(), bound7(r.upper, true).c_str(), percent(r.lower, diagonal),
-               percent(r.upper, diagonal),
+  std::fprintf(s, "\n  Hausdorff distance in [%s, %s]  (%s%% .. %s%% of diagonal)%s\n",
+               outwardBound(r.lower, 7, false).c_str(), outwardBound(r.upper, 7, true).c_str(),
+               outwardFixed(percent(r.lower, diagonal), 5, false).c_str(),
+               outwardFixed(percent(r.upper, diagonal), 5, true).c_str(),
                r.converged ? "" : "  (tolerance not reached: refinement hit rounding size)");
   std::fprintf(s, "  time %.3f s (hierarchies %.3f s), %llu samples, %llu triangles refined\n",
                r.seconds, r.build_seconds, static_cast<unsigned long long>(r.counters.samples),

@@ -1,12 +1,14 @@
 // meshsweep sample: reproducible query points near a mesh or in its bounding box, written in the
 // format readPoints() reads (and so `meshsweep closest` does).
 #include "core/mesh_io.h"
+#include "tools/bound_text.h"
 #include "tools/commands.h"
 
 #include <Eigen/Geometry>
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <limits>
 #include <random>
 
@@ -22,7 +24,10 @@ const char kSampleHelp[] =
     "             uniformly random direction by a uniformly random distance in [0, F*diagonal]\n"
     "  --box F    uniform in the bounding box grown by F*diagonal on every side\n"
     "             (the default, with F = 0.1)\n"
-    "  --seed S   seed of the random generator (default 1); the same seed gives the same points\n"
+    "  --seed S   seed of the random generator, 0 to 2^64 - 1 (default 1); the same seed gives\n"
+    "             the same points\n"
+    "F may be at most what keeps every coordinate within +-1e150 (the range that\n"
+    "'meshsweep closest' reads); a larger F is refused.\n"
     "\n"
     "Exit status: 0 success, 1 unreadable/invalid mesh or unwritable output, 2 bad command line.\n";
 
@@ -105,12 +110,26 @@ int runSample(int argc, char** argv, int first) {
   const Mesh mesh = readMesh(args.positional()[0]);
   const std::string problem = checkMesh(mesh);
   if (!problem.empty()) throw MeshError(problem);
-  Output out(args.has("--out") ? args.value("--out") : std::string("-"));
 
   Vec3 lower, upper;
   meshBounds(mesh, lower, upper);
   const double diagonal = (upper - lower).norm();
-  const double reach = fraction * diagonal;
+  // Every point lies in the bounding box grown by reach, so the points stay in the coordinate
+  // range that readPoints() (and so `meshsweep closest`) accepts while that box does; the
+  // margin covers the rounding of the box.
+  const double largest = std::max(lower.cwiseAbs().maxCoeff(), upper.cwiseAbs().maxCoeff());
+  const double largest_fraction = (kMaxCoordinate * (1 - 1e-9) - largest) / diagonal;
+  if (fraction > 0 && diagonal > 0 && !(fraction <= largest_fraction)) {
+    const char* option = near ? "--near" : "--box";
+    char limit[32];
+    std::snprintf(limit, sizeof limit, "%g", kMaxCoordinate);
+    throw UsageError("sample: " + std::string(option) + " must be at most " +
+                     outwardBound(std::max(largest_fraction, 0.0), 6, false) + " for " +
+                     args.positional()[0] + " (every coordinate must stay within +-" + limit +
+                     "; got " + args.value(option) + ")");
+  }
+  const double reach = diagonal > 0 ? fraction * diagonal : 0;
+  Output out(args.has("--out") ? args.value("--out") : std::string("-"));
   Random random(seed);
 
   std::string mesh_name = args.positional()[0];
@@ -121,19 +140,23 @@ int runSample(int argc, char** argv, int first) {
                                    : args.has("--box") ? args.value("--box") : "0.1";
   out.write(" " + std::to_string(count) + (near ? " --near " : " --box ") + fraction_text +
             " --seed " + std::to_string(seed) + "\n");
+  // Rounding may carry a point an ulp past the grown box: it is kept inside, in range.
+  const Vec3 grown_lower = lower.array() - reach, grown_upper = upper.array() + reach;
   if (near) {
     const SurfaceSampler sampler(mesh);
     for (uint64_t i = 0; i < count; ++i) {
       const Vec3 on_surface = sampler.sample(random);
-      const Vec3 p = on_surface + (reach * random.uniform()) * random.direction();
+      const Vec3 p = (on_surface + (reach * random.uniform()) * random.direction())
+                         .cwiseMax(grown_lower)
+                         .cwiseMin(grown_upper);
       out.printf("%.17g %.17g %.17g\n", p.x(), p.y(), p.z());
     }
   } else {
-    const Vec3 box_lower = lower.array() - reach;
     const Vec3 extent = (upper - lower).array() + 2 * reach;
     for (uint64_t i = 0; i < count; ++i) {
       const Vec3 u(random.uniform(), random.uniform(), random.uniform());
-      const Vec3 p = box_lower + extent.cwiseProduct(u);
+      const Vec3 p =
+          (grown_lower + extent.cwiseProduct(u)).cwiseMax(grown_lower).cwiseMin(grown_upper);
       out.printf("%.17g %.17g %.17g\n", p.x(), p.y(), p.z());
     }
   }

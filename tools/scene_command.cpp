@@ -2,7 +2,9 @@
 #include "scenes/scene_demos.h"
 #include "tools/cli.h"
 
+#include <fcntl.h>
 #include <sys/stat.h>
+#include <unistd.h>
 
 #include <cerrno>
 #include <chrono>
@@ -43,6 +45,22 @@ void makeDirectories(const std::string& path) {
   }
 }
 
+// Checks, before a scene runs, that DIR/NAME.png can be written: DIR is a directory and the
+// file can be created there (or, if it exists, opened for writing). Leaves an existing picture
+// as it is and removes the probe it created. Throws IoError.
+void checkWritable(const std::string& out_dir, const std::string& path) {
+  struct stat status;
+  if (::stat(out_dir.c_str(), &status) != 0)
+    throw IoError(out_dir + ": cannot use as output directory (" + std::strerror(errno) + ")");
+  if (!S_ISDIR(status.st_mode)) throw IoError(out_dir + ": not a directory");
+  int fd = ::open(path.c_str(), O_WRONLY | O_CREAT | O_EXCL, 0666);
+  const bool created = fd >= 0;
+  if (!created && errno == EEXIST) fd = ::open(path.c_str(), O_WRONLY);
+  if (fd < 0) throw IoError(path + ": cannot open for writing: " + std::strerror(errno));
+  ::close(fd);
+  if (created) ::unlink(path.c_str());
+}
+
 }  // namespace
 
 int runScene(int argc, char** argv, int first) {
@@ -59,7 +77,9 @@ int runScene(int argc, char** argv, int first) {
     if (!known) throw UsageError("scene: unknown scene '" + name + "' (hausdorff, particle, cloth, all)");
     names = {name};
   }
+  // Before any scene runs (the hausdorff scene takes a while), so a bad DIR fails at once.
   makeDirectories(out_dir);
+  for (const std::string& n : names) checkWritable(out_dir, out_dir + "/" + n + ".png");
   for (const std::string& n : names) {
     const auto start = std::chrono::steady_clock::now();
     const std::string path = scenes::runScene(n, out_dir, stdout);

@@ -1,5 +1,6 @@
 # Tests of the meshsweep command line, run by CTest as
-#   cmake -DMESHSWEEP=... -DEXAMPLE=... -DWORK_DIR=... [-DDATA_DIR=...] -P test_meshsweep.cmake
+#   cmake -DMESHSWEEP=... -DEXAMPLE=... -DWORK_DIR=... [-DSERVICE_EXAMPLE=...] [-DDATA_DIR=...]
+#         -P test_meshsweep.cmake
 # Each case runs the tool once and checks its exit status, and substrings of its standard
 # output and error. Expected rows come from a hand-drawn mesh with exact answers:
 #
@@ -21,6 +22,9 @@ endforeach()
 foreach(var MESHSWEEP EXAMPLE WORK_DIR)
   get_filename_component(${var} "${${var}}" ABSOLUTE)
 endforeach()
+if(SERVICE_EXAMPLE)
+  get_filename_component(SERVICE_EXAMPLE "${SERVICE_EXAMPLE}" ABSOLUTE)
+endif()
 
 file(REMOVE_RECURSE "${WORK_DIR}")
 file(MAKE_DIRECTORY "${WORK_DIR}")
@@ -166,6 +170,9 @@ check(negative_k RC 2 ARGS closest quad.off points.txt --k -3 ERR "--k must be a
 check(fraction_k RC 2 ARGS closest quad.off points.txt --k 1.5 ERR "--k must be an integer")
 check(huge_k RC 2 ARGS closest quad.off points.txt --k 99999999999999999999 ERR "--k must be")
 check(k_and_within RC 2 ARGS closest quad.off points.txt --k 2 --within 1 ERR "cannot be combined")
+# --within has no coherent form in the tool: --path with it is refused, not silently ignored.
+check(within_path RC 2 ARGS closest quad.off points.txt --within 1 --path
+  ERR "meshsweep: closest: --path cannot be combined with --within")
 check(repeated_option RC 2 ARGS closest quad.off points.txt --k 2 --k 3 ERR "given twice")
 
 # Input and output file errors: exit status 1.
@@ -197,11 +204,49 @@ check(sample_box RC 0 ARGS sample quad.off 3 OUT "# meshsweep sample quad.off 3 
 check(sample_zero RC 2 ARGS sample quad.off 0 ERR "sample: N must be an integer")
 check(sample_two_modes RC 2 ARGS sample quad.off 3 --near 0.1 --box 0.1 ERR "cannot be combined")
 check(sample_no_mesh RC 1 ARGS sample absent.off 3 ERR "meshsweep: " "absent.off")
+check(sample_negative RC 2 ARGS sample quad.off -5
+  ERR "meshsweep: sample: N must be an integer in [1, 100000000] (got '-5')")
+# The whole uint64 range of seeds, as the message says.
+check(sample_seed_max RC 0 ARGS sample quad.off 2 --seed 18446744073709551615
+  OUT "--seed 18446744073709551615\n")
+check(sample_seed_over RC 2 ARGS sample quad.off 2 --seed 18446744073709551616
+  ERR "--seed must be an integer in [0, 18446744073709551615] (got 18446744073709551616)")
+# A fraction whose points could leave the coordinate range (+-1e150) is refused: --box 1e308
+# printed 'inf inf inf', --near 1e200 coordinates that closest refuses. quad.off's diagonal is
+# sqrt(2) and its farthest coordinate 1, so F may be up to (1e150 - 1) / sqrt(2) = 7.0710678e149.
+check(sample_box_huge RC 2 ARGS sample quad.off 3 --box 1e308
+  ERR "meshsweep: sample: --box must be at most 7.07106e+149 for quad.off" "got 1e308"
+  NOT_OUT "inf")
+check(sample_near_huge RC 2 ARGS sample quad.off 3 --near 1e200
+  ERR "meshsweep: sample: --near must be at most 7.07106e+149 for quad.off")
+check(sample_box_over RC 2 ARGS sample quad.off 3 --box 7.07107e149 ERR "--box must be at most")
+check(sample_box_limit RC 0 ARGS sample quad.off 50 --box 7.07106e149 --out sample_box_limit.txt)
+check(sample_box_limit_closest RC 0 ARGS closest quad.off sample_box_limit.txt ERR "\"rows\": 50")
+check(sample_near_limit RC 0 ARGS sample quad.off 50 --near 7.07106e149 --out sample_near_limit.txt)
+check(sample_near_limit_closest RC 0 ARGS closest quad.off sample_near_limit.txt
+  ERR "\"rows\": 50")
 
 # The README's library example.
 check(example RC 0 COMMAND "${EXAMPLE}" ARGS quad.off 0.75 0.25 1
   OUT "distance 1, triangle 0, point (0.75, 0.25, 0)")
 check(example_bad_mesh RC 1 COMMAND "${EXAMPLE}" ARGS absent.off 0 0 0 ERR "closest_example: ")
+
+# The README's distance-service example: STEPS must be a positive integer (atoi ran 0 steps).
+if(SERVICE_EXAMPLE)
+  check(service_example RC 0 COMMAND "${SERVICE_EXAMPLE}" ARGS quad.off 1 OUT "step  0: ")
+  check(service_example_text RC 2 COMMAND "${SERVICE_EXAMPLE}" ARGS quad.off abc
+    ERR "service_example: STEPS must be a positive integer (got 'abc')" NOT_OUT "step")
+  check(service_example_negative RC 2 COMMAND "${SERVICE_EXAMPLE}" ARGS quad.off -3
+    ERR "service_example: STEPS must be a positive integer (got '-3')" NOT_OUT "step")
+endif()
+
+# scene checks its output before running anything: a file as DIR, or a directory where the
+# picture goes, fails at once (no scene's console output).
+check(scene_out_not_directory RC 1 ARGS scene all --out quad.off
+  ERR "meshsweep: quad.off: not a directory" NOT_OUT "scene " "hausdorff:")
+file(MAKE_DIRECTORY "${WORK_DIR}/scene_blocked/particle.png")
+check(scene_out_blocked RC 1 ARGS scene particle --out scene_blocked
+  ERR "meshsweep: scene_blocked/particle.png: cannot open for writing" NOT_OUT "particle:")
 
 # A real mesh, when scripts/fetch_data.sh has extracted them.
 if(DATA_DIR AND EXISTS "${DATA_DIR}/armadillo.off")
@@ -220,6 +265,10 @@ if(DATA_DIR AND EXISTS "${DATA_DIR}/armadillo.off")
     --out real_path_k.csv ERR "\"rows\": 600")
   same_files(real.csv real_path.csv)
   same_files(real_k.csv real_path_k.csv)
+  # The scene's certified bounds and percentages are rounded outward (rounded to nearest, the
+  # lower percentage printed as 0.8451%, above the proven value).
+  check(scene_hausdorff RC 0 ARGS scene hausdorff --out scene_hausdorff
+    OUT "hausdorff: H(simplified, original) in [1.93359, 1.95391] (0.8450% .. 0.8540% ")
 endif()
 
 # Ties: points over the vertices and edge midpoints of a grid are equidistant from several
@@ -244,7 +293,34 @@ same_files(ties_plain.csv ties_front.csv)
 # sqrt(14) = 3.74165738..., so its upper bound prints as 3.741658, not 3.741657.
 file(WRITE "${WORK_DIR}/point.off" "OFF\n3 1 0\n3 1 2\n3 1 2\n3 1 2\n3 0 1 2\n")
 check(hausdorff_outward RC 0 ARGS hausdorff quad.off point.off
-  OUT "Hausdorff distance in [3.741657, 3.741658]" "B -> A  max in [2.828427, 2.828428]")
+  OUT "Hausdorff distance in [3.741657, 3.741658]" "B -> A  max in [2.828427, 2.828428]"
+      "(264.57513% .. 264.57514% of diagonal)")
+
+# --json and --colors to one destination would lose the JSON (the PLY is written last).
+check(hausdorff_same_file RC 2 ARGS hausdorff quad.off point.off --json same.out --colors same.out
+  ERR "meshsweep: hausdorff: --json and --colors cannot write to the same file 'same.out'")
+check(hausdorff_same_file_two_names RC 2 ARGS hausdorff quad.off point.off --json ./same.out
+  --colors same.out ERR "cannot write to the same file")
+check(hausdorff_same_stdout RC 2 ARGS hausdorff quad.off point.off --json - --colors -
+  ERR "cannot write to the same standard output")
+check(hausdorff_json_stdout_colors RC 0 ARGS hausdorff quad.off point.off --json - --colors colors.ply
+  OUT "\"hausdorff\": {\"lower\": 3.74165" ERR "Hausdorff distance in [")
+if(EXISTS "${WORK_DIR}/same.out")
+  message("FAIL hausdorff_same_file: a refused command created same.out")
+  math(EXPR failed "${failed} + 1")
+else()
+  math(EXPR passed "${passed} + 1")
+endif()
+set(colors "")
+if(EXISTS "${WORK_DIR}/colors.ply")
+  file(READ "${WORK_DIR}/colors.ply" colors LIMIT 4)
+endif()
+if(colors STREQUAL "ply\n")
+  math(EXPR passed "${passed} + 1")
+else()
+  message("FAIL hausdorff_json_stdout_colors: colors.ply starts with '${colors}'")
+  math(EXPR failed "${failed} + 1")
+endif()
 
 # A report that cannot be written (a full device) is an error, whatever the command.
 if(EXISTS /dev/full)

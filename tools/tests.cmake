@@ -3,6 +3,7 @@
 if(TARGET meshsweep)
   add_test(NAME meshsweep_cli COMMAND ${CMAKE_COMMAND}
     -DMESHSWEEP=$<TARGET_FILE:meshsweep> -DEXAMPLE=$<TARGET_FILE:closest_example>
+    -DSERVICE_EXAMPLE=$<TARGET_FILE:service_example>
     -DWORK_DIR=${CMAKE_CURRENT_BINARY_DIR}/meshsweep_cli -DDATA_DIR=${MESHSWEEPER_DATA_DIR}
     -P ${PROJECT_SOURCE_DIR}/tools/test_meshsweep.cmake)
 endif()
