@@ -20,7 +20,9 @@ void RigidBody::setPose(const Eigen::Isometry3d& pose) {
   // world answer by about e times the point's distance from the body's origin, so only the
   // rounding of a computed rotation is accepted.
   if (!(r.transpose() * r).isIdentity(1e-12) || std::abs(r.determinant() - 1) > 1e-12)
-    throw std::invalid_argument("RigidBody: the pose's rotation is not orthonormal (a rigid pose has no scale or shear)");
+    throw std::invalid_argument(
+        "RigidBody: the pose's rotation is not orthonormal to 1e-12 (a rigid pose has no scale or shear; "
+        "re-orthonormalise a rotation composed over many steps, e.g. through a normalised quaternion)");
   pose_ = pose;
   inverse_ = pose.inverse(Eigen::Isometry);
 }
