@@ -30,7 +30,9 @@
 // A step's time covers the body updates (poses, positions, Embree refits), the broadphase and
 // the queries. Reported: median and minimum wall time per step over the steps, CPU time of the
 // calling thread per step (T = 1: robust to a loaded machine), and the checks: at the first and
-// the last step both methods must agree on every point (1e-9 relative), else exit code 3.
+// the last step both methods must agree on every point (1e-9 relative), else exit code 3. After
+// the table, the ratios: Embree / Meshsweeper per configuration and thread count, and
+// Meshsweeper's speedup on T threads over one.
 //
 // --broadphase: times the broadphase alone (flat SoA loop, the AoS reference, a uniform grid over
 // the bodies) for 1, 4, 16, 64 bodies and 10k, 100k points.
@@ -889,6 +891,7 @@ int main(int argc, char** argv) {
   if (options.within > 0) query = {QueryMode::kWithin, options.within};
   std::printf("Query: %s %g of every point.\n\n", query.mode == QueryMode::kWithin ? "every triangle within" : "the closest hit within",
               query.distance);
+  std::vector<std::string> ratios;  // printed after the table
   std::printf("| kind | bodies | points | method | threads | median ms/step | min ms/step | CPU ms/step | "
               "all threads CPU ms/step | pairs/point | hits | certified |\n"
               "|---|---|---|---|---|---|---|---|---|---|---|---|\n");
@@ -922,8 +925,35 @@ int main(int argc, char** argv) {
             results.push_back(r);
           }
         }
+        // Ratios: Embree over Meshsweeper, per thread count (one thread: the calling thread's CPU
+        // time, robust to a loaded machine; more: median wall time).
+        if (results.size() == options.methods.size() * options.threads.size() && options.methods.size() == 2) {
+          const size_t embree_first = options.methods[0] == "embree" ? 0 : options.threads.size();
+          const size_t ours_first = options.threads.size() - embree_first;
+          for (size_t t = 0; t < options.threads.size(); ++t) {
+            const RunResult& e = results[embree_first + t];
+            const RunResult& m = results[ours_first + t];
+            const bool one = options.threads[t] == 1;
+            const double ratio = one ? median(e.cpu) / median(m.cpu) : median(e.wall) / median(m.wall);
+            char line[200];
+            std::snprintf(line, sizeof line, "%s, %zu bodies, %zu points, %u thread%s: Embree / Meshsweeper %.2fx (%s)",
+                          kind.c_str(), bodies, points, options.threads[t], one ? "" : "s", ratio,
+                          one ? "CPU time" : "median wall time");
+            ratios.push_back(line);
+            if (!one && options.threads[0] == 1) {  // scaling: the first thread count is 1
+              std::snprintf(line, sizeof line, "%s, %zu bodies, %zu points: Meshsweeper %u threads %.2fx one (median wall time)",
+                            kind.c_str(), bodies, points, options.threads[t],
+                            median(results[ours_first].wall) / median(m.wall));
+              ratios.push_back(line);
+            }
+          }
+        }
       }
     }
+  }
+  if (!ratios.empty()) {
+    std::printf("\n## Ratios\n\n");
+    for (const std::string& line : ratios) std::printf("- %s\n", line.c_str());
   }
   return 0;
 }
