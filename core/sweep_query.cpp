@@ -778,10 +778,12 @@ void QueryStream::withinCoherent(const Vec3& p, double d, CoherentState& state, 
     certified = testSetWithin(state, p, moved, d, out);
   }
   bool answered = certified;
+  // A set that did not certify this step is dropped (it may belong to another lineage, which
+  // the state is about to take): only a set gathered now may answer later steps.
+  if (!answered) state.has_set = false;
   if (!answered && state.reach_steps > 0 && d < kInf) {
     if (state.within_wait > 0) {
       --state.within_wait;
-      state.has_set = false;
     } else {
       // Gathered within d + 2R, lead_steps mean steps ahead when that is within 2R (p must
       // still be certified by it), else at p.

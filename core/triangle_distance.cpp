@@ -277,9 +277,19 @@ inline double closestImpl(const Vec3& pe, const Vec3& ae, const Vec3& be, const 
     const double w = proj.wc / s;
     res.point = needle ? proj.q : pointAt(f.a, v, f.ab, w, f.ac);
     if (kDetails) {
-      res.bary[0] = proj.wa / s;
-      res.bary[1] = v;
-      res.bary[2] = w;
+      if (needle) {
+        // A needle's edge functions cross its short edge (wa loses eps * |ap| over it); its
+        // Gram numerators are accurate (its largest angle is far from 180 degrees).
+        const double ga = f.va > 0.0 ? f.va : 0.0, gb = f.vb > 0.0 ? f.vb : 0.0, gc = f.vc > 0.0 ? f.vc : 0.0;
+        const double g = ga + gb + gc;
+        res.bary[0] = g > 0.0 ? ga / g : proj.wa / s;
+        res.bary[1] = g > 0.0 ? gb / g : v;
+        res.bary[2] = g > 0.0 ? gc / g : w;
+      } else {
+        res.bary[0] = proj.wa / s;
+        res.bary[1] = v;
+        res.bary[2] = w;
+      }
       res.feature = kLocalFace;
     }
   } else if (degenerate || thin) {

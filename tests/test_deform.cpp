@@ -649,6 +649,39 @@ TEST_CASE("deforming bodies: a large drift still counts small motions", "[deform
   CHECK(f.checks() == 1501);
 }
 
+// withinCoherent with an infinite radius answers by a plain search; the set it did not use must
+// not survive into a new lineage (found by review: after a re-anchoring and one such step, the
+// previous lineage's set answered "no face" for a point with six faces within d).
+TEST_CASE("deforming bodies: withinCoherent across a new lineage", "[deform]") {
+  const Mesh mesh = scenes::icosphere(3, 1.0);
+  const auto h = Hierarchy::build(mesh);
+  DeformingBody body(h);
+  body.inflate(0.1);
+  QueryStream stream(h), plain(h);
+  stream.setGeometry(&body.geometry());
+  plain.setGeometry(&body.geometry());
+  const Vec3 p(0.55, 0.52, 0.6);
+  const double d = 0.087;
+  CoherentState state;
+  std::vector<TriangleHit> got, expected;
+  for (int i = 0; i < 10; ++i) stream.withinCoherent(p + Vec3(0, 0, 1e-4 * i), d, state, got);
+  // Mirrored in x: a new lineage (anchor), the point now far from the faces it had.
+  std::vector<Vec3> mirrored = mesh.positions;
+  for (Vec3& x : mirrored) x.x() = -x.x();
+  body.anchor(mirrored);
+  stream.withinCoherent(p, std::numeric_limits<double>::infinity(), state, got);
+  plain.within(p, std::numeric_limits<double>::infinity(), expected);
+  CHECK(got.size() == expected.size());
+  for (int i = 0; i < 3; ++i) {
+    bool certified = false;
+    stream.withinCoherent(p, d, state, got, &certified);
+    plain.within(p, d, expected);
+    REQUIRE(got.size() == expected.size());
+    for (size_t k = 0; k < got.size(); ++k) CHECK(got[k].triangle == expected[k].triangle);
+  }
+  CHECK(!expected.empty());
+}
+
 TEST_CASE("rigid bodies: non-rigid poses throw", "[deform][rigid]") {
   const auto h = Hierarchy::build(scenes::icosphere(2));
   Eigen::Isometry3d scaled = Eigen::Isometry3d::Identity();

@@ -660,3 +660,18 @@ TEST_CASE("closest point: needles", "[triangle_distance]") {
     CHECK(failures == 0);
   }
 }
+
+// A needle's face point comes with barycentric coordinates that rebuild it (found by review:
+// its edge functions cross the short edge, and b0 came out 2e-5 off on a needle whose short
+// edge is 1e-12 of its long ones).
+TEST_CASE("closest point: a needle's barycentric coordinates rebuild its point", "[triangle_distance]") {
+  const Vec3 p(-0.72876749816808017, -0.23087227880763431, 0.1271013318562918);
+  const Vec3 a(-0.80749165079414742, -0.082485078605954776, 0.25392983879380648);
+  const Vec3 b(-0.43346918998343714, -0.78748022838924214, -0.34863886068463545);
+  const Vec3 c(-0.43346918998268497, -0.78748022838839005, -0.34863886068489092);
+  const TriangleClosest r = closestPointOnTriangle(p, a, b, c);
+  const Vec3 rebuilt = r.barycentric[0] * a + r.barycentric[1] * b + r.barycentric[2] * c;
+  CHECK((rebuilt - r.point).norm() <= 1e-14);
+  CHECK(r.barycentric[0] == Approx(0.78952025379530655).epsilon(1e-12));
+  CHECK(agrees(r.squared_distance, referenceSquared(p, a, b, c), maxAbs(p, a, b, c)));
+}
