@@ -16,15 +16,17 @@ void RigidBody::setPose(const Eigen::Isometry3d& pose) {
     throw std::invalid_argument("RigidBody: the pose has a non-finite entry");
   if (!inCoordinateRange(pose.translation()))
     throw std::invalid_argument("RigidBody: the pose's translation is beyond 1e150 in magnitude");
-  // Queries map points by the inverse isometry (R^T): a rotation off orthonormal by e moves a
-  // world answer by about e times the point's distance from the body's origin, so only the
-  // rounding of a computed rotation is accepted.
-  if (!(r.transpose() * r).isIdentity(1e-12) || std::abs(r.determinant() - 1) > 1e-12)
+  // A rotation composed over many steps drifts from orthonormal (R = R * dR: 1e-12 after some
+  // 15,000 steps), and a scale or shear is no rigid pose. Up to 1e-9 the body is placed at the
+  // rotation re-orthonormalised (through a normalised quaternion: pose() returns it), so that
+  // answers stay exact for the pose the body has; beyond, the pose is refused.
+  if (!(r.transpose() * r).isIdentity(1e-9) || std::abs(r.determinant() - 1) > 1e-9)
     throw std::invalid_argument(
-        "RigidBody: the pose's rotation is not orthonormal to 1e-12 (a rigid pose has no scale or shear; "
-        "re-orthonormalise a rotation composed over many steps, e.g. through a normalised quaternion)");
+        "RigidBody: the pose's rotation is not orthonormal to 1e-9 (a rigid pose has no scale or shear)");
   pose_ = pose;
-  inverse_ = pose.inverse(Eigen::Isometry);
+  if (!(r.transpose() * r).isIdentity(1e-15))
+    pose_.linear() = Eigen::Quaterniond(r).normalized().toRotationMatrix();
+  inverse_ = pose_.inverse(Eigen::Isometry);
 }
 
 ClosestPoint RigidBody::toWorld(ClosestPoint result) const {

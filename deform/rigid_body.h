@@ -11,8 +11,9 @@ namespace meshsweeper {
 class RigidBody {
  public:
   // Places `hierarchy` at `pose`. Throws std::invalid_argument if the pose is not rigid
-  // (rotation not orthonormal with determinant 1, to 1e-12: re-orthonormalise a rotation
-  // composed over many steps) or not finite.
+  // (rotation not orthonormal with determinant 1, to 1e-9) or not finite. A rotation off
+  // orthonormal by more than rounding (one composed over many steps) is re-orthonormalised:
+  // pose() returns the pose the body has, for which every answer is exact.
   explicit RigidBody(std::shared_ptr<const Hierarchy> hierarchy,
                      const Eigen::Isometry3d& pose = Eigen::Isometry3d::Identity());
 
