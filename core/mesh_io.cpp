@@ -415,9 +415,10 @@ std::string checkObjFaces(const std::string& text) {
 // about its Newell normal: c0 sees the whole polygon, as in any convex one) it is the
 // triangulation, in that documented order. Otherwise the polygon is cut into ears in the plane
 // of its Newell normal, so a planar polygon is covered exactly (that fan would cover area
-// outside it). A polygon with no ear to cut
-// (self-intersecting, far from planar), or a non-convex one of more than 1024 corners (ear
-// cutting is cubic here), has no one right answer: the rest is fanned.
+// outside it). A polygon with no ear to cut (self-intersecting, far from planar) has no one
+// right answer: the rest is fanned; so is a non-convex one of more than kMaxEarCorners
+// corners (ear cutting is quadratic to cubic in the corners).
+constexpr std::size_t kMaxEarCorners = 8192;
 void triangulatePolygon(const std::vector<Vec3>& x, std::vector<VertexIndex>& ring, std::vector<Triangle>& out) {
   const std::size_t k = ring.size();
   auto fan = [&] {
@@ -432,24 +433,31 @@ void triangulatePolygon(const std::vector<Vec3>& x, std::vector<VertexIndex>& ri
   // whole polygon: convex ones, and many others).
   bool fan_ok = true;
   for (std::size_t j = 1; j + 1 < k && fan_ok; ++j) fan_ok = !(turn(ring[0], ring[j], ring[j + 1]) < 0);
-  if (fan_ok || !(normal.squaredNorm() > 0) || k > 1024) return fan();
+  if (fan_ok || !(normal.squaredNorm() > 0) || k > kMaxEarCorners) return fan();
   auto inside = [&](VertexIndex q, VertexIndex a, VertexIndex b, VertexIndex c) {  // closed triangle, along the normal
     return turn(a, b, q) >= 0 && turn(b, c, q) >= 0 && turn(c, a, q) >= 0;
   };
+  // A corner at the position of one of the ear's (a pinched polygon) does not block it.
+  auto elsewhere = [&](VertexIndex q, VertexIndex a, VertexIndex b, VertexIndex c) {
+    return x[q] != x[a] && x[q] != x[b] && x[q] != x[c];
+  };
+  std::size_t from = 0;  // the search resumes next to the last ear: near-quadratic in all
   while (ring.size() > 3) {
     const std::size_t n = ring.size();
     bool cut = false;
-    for (std::size_t i = 0; i < n && !cut; ++i) {
+    for (std::size_t step = 0; step < n && !cut; ++step) {
+      const std::size_t i = (from + step) % n;
       const VertexIndex a = ring[(i + n - 1) % n], b = ring[i], c = ring[(i + 1) % n];
       if (!(turn(a, b, c) > 0)) continue;  // reflex or flat: not an ear
       bool empty = true;
       for (std::size_t j = 0; j < n && empty; ++j) {
         const VertexIndex q = ring[j];
-        if (q != a && q != b && q != c) empty = !inside(q, a, b, c);
+        if (elsewhere(q, a, b, c)) empty = !inside(q, a, b, c);
       }
       if (!empty) continue;
       out.push_back({a, b, c});
       ring.erase(ring.begin() + static_cast<std::ptrdiff_t>(i));
+      from = i == 0 ? 0 : i - 1;
       cut = true;
     }
     if (!cut) break;

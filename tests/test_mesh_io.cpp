@@ -274,6 +274,41 @@ TEST_CASE("polygons: the fan where it is right, ears where it is not", "[mesh_io
   const Mesh fanned = meshsweeper::readMesh(dir.write("l2.off", "OFF\n6 1 0\n0 0 0\n2 0 0\n2 1 0\n1 1 0\n1 2 0\n0 2 0\n6 0 1 2 3 4 5\n"));
   const std::vector<Triangle> fan = {{0, 1, 2}, {0, 2, 3}, {0, 3, 4}, {0, 4, 5}};
   CHECK(fanned.triangles == fan);
+  auto covered = [](const Mesh& m) {
+    double sum = 0;
+    for (const Triangle& t : m.triangles) {
+      const Vec3 n = (m.positions[t[1]] - m.positions[t[0]]).cross(m.positions[t[2]] - m.positions[t[0]]);
+      sum += 0.5 * n.norm();
+      if (n.z() < 0) sum += 1e9;  // an inverted triangle
+    }
+    return sum;
+  };
+  // Pinched: two corners at one position (different indices), area 2 (found by review: no ear
+  // was cut, the fan covered 4 with an inverted triangle).
+  const Mesh pinched = meshsweeper::readMesh(
+      dir.write("pinched.off", "OFF\n6 1 0\n0 0 0\n2 0 0\n1 1 0\n2 2 0\n0 2 0\n1 1 0\n6 0 1 2 3 4 5\n"));
+  CHECK(pinched.triangles.size() == 4);
+  CHECK(covered(pinched) == Approx(2.0).epsilon(1e-15));
+  // A star of 2,000 corners (radii 1 and 0.5 in turn) from a reflex corner: ears, exact area.
+  std::string star = "OFF\n2000 1 0\n";
+  double star_area = 0;
+  std::vector<Vec3> corners;
+  for (int i = 0; i < 2000; ++i) {
+    const double angle = 2 * M_PI * i / 2000, radius = i % 2 ? 1.0 : 0.5;
+    corners.emplace_back(radius * std::cos(angle), radius * std::sin(angle), 0);
+  }
+  for (const Vec3& c : corners) star += std::to_string(c.x()) + " " + std::to_string(c.y()) + " 0\n";
+  star += "2000";
+  for (int i = 0; i < 2000; ++i) star += " " + std::to_string(i);
+  star += "\n";
+  const Mesh star_mesh = meshsweeper::readMesh(dir.write("star.off", star));
+  for (int i = 0; i < 2000; ++i) {
+    const Vec3& a = star_mesh.positions[i];
+    const Vec3& b = star_mesh.positions[(i + 1) % 2000];
+    star_area += 0.5 * (a.x() * b.y() - b.x() * a.y());
+  }
+  CHECK(star_mesh.triangles.size() == 1998);
+  CHECK(covered(star_mesh) == Approx(star_area).epsilon(1e-12));
 }
 
 TEST_CASE("binary PLY, little and big endian, float and double coordinates", "[mesh_io]") {
