@@ -26,13 +26,16 @@
 #include "core/brute_force.h"
 #include "core/mesh_io.h"
 #include "scenes/procedural.h"
+#include "tools/bound_text.h"
 
 #include <catch2/catch.hpp>
 
 #include <algorithm>
 #include <cmath>
 #include <filesystem>
+#include <limits>
 #include <map>
+#include <random>
 #include <stdexcept>
 #include <string>
 #include <tuple>
@@ -588,5 +591,32 @@ TEST_CASE("a triangle over a valley: the maximum above the crease, away from the
     CHECK(r.lower <= exact + 1e-12);
     CHECK(r.upper - r.lower <= tolerance);
     checkAgainstBruteForce(r.a_to_b, triangle, valley, 200, 5);
+  }
+}
+
+// Certified bounds printed with few digits (tools/bound_text.h, used by `meshsweep hausdorff`
+// and the Hausdorff scene) round outward, judged against the exact value: "0.1" is below the
+// double 0.1 (found by review: the read-back in double took them for equal), subnormals and
+// the largest doubles included.
+TEST_CASE("printed bounds round outward") {
+  using meshsweeper::cli::outwardBound;
+  using meshsweeper::cli::outwardFixed;
+  CHECK(outwardBound(0.1, 7, true) == "0.1000001");
+  CHECK(outwardBound(0.1, 7, false) == "0.1");
+  CHECK(outwardBound(0.3, 7, false) == "0.2999999");
+  CHECK(outwardBound(-0.1, 7, false) == "-0.1000001");
+  CHECK(outwardBound(1.0, 7, true) == "1");
+  CHECK(outwardFixed(0.25, 5, false) == "0.25000");
+  CHECK(outwardFixed(std::numeric_limits<double>::max(), 5, false).find("inf") == std::string::npos);
+  std::mt19937_64 rng(3);
+  for (int i = 0; i < 20000; ++i) {
+    const double x = std::ldexp(static_cast<double>(rng() >> 11), static_cast<int>(rng() % 200) - 150) *
+                     (rng() & 1 ? 1 : -1);
+    for (bool up : {false, true}) {
+      const long double b = std::strtold(outwardBound(x, 7, up).c_str(), nullptr);
+      const long double f = std::strtold(outwardFixed(x, 5, up).c_str(), nullptr);
+      CHECK((up ? b >= x : b <= x));
+      CHECK((up ? f >= x : f <= x));
+    }
   }
 }
