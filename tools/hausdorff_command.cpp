@@ -7,6 +7,8 @@
 
 #include <Eigen/Geometry>
 
+#include <sys/stat.h>
+
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -60,17 +62,37 @@ double percent(double value, double diagonal) { return diagonal > 0 ? 100 * valu
 
 bool isStandardOutput(const std::string& path) { return path.empty() || path == "-"; }
 
-// Whether two output paths are one destination: both standard output, the same existing file
-// under two names, or one new file reached two ways ("r.json", "./r.json").
-bool sameDestination(const std::string& a, const std::string& b) {
-  if (isStandardOutput(a) || isStandardOutput(b)) return isStandardOutput(a) == isStandardOutput(b);
-  if (a == b) return true;
+// "-", or a name of the file standard output writes to (/dev/stdout, /proc/self/fd/1, ...).
+bool namesStandardOutput(const std::string& path) {
+  if (isStandardOutput(path)) return true;
+  struct stat out {}, named {};
+  return fstat(1, &out) == 0 && stat(path.c_str(), &named) == 0 && out.st_dev == named.st_dev &&
+         out.st_ino == named.st_ino;
+}
+
+// The path a name leads to, symbolic links followed even when their target does not exist yet
+// (a dangling link is created through when written).
+std::filesystem::path destination(const std::string& name) {
   namespace fs = std::filesystem;
-  std::error_code error_a, error_b;
-  if (fs::equivalent(a, b, error_a)) return true;
-  const fs::path canonical_a = fs::weakly_canonical(fs::absolute(a, error_a), error_a);
-  const fs::path canonical_b = fs::weakly_canonical(fs::absolute(b, error_b), error_b);
-  return !error_a && !error_b && canonical_a == canonical_b;
+  std::error_code error;
+  fs::path path = fs::absolute(name, error);
+  for (int hop = 0; hop < 40 && fs::is_symlink(path, error); ++hop) {
+    const fs::path target = fs::read_symlink(path, error);
+    if (error) break;
+    path = target.is_absolute() ? target : path.parent_path() / target;
+  }
+  const fs::path canonical = fs::weakly_canonical(path, error);
+  return error ? path.lexically_normal() : canonical;
+}
+
+// Whether two output paths are one destination: both standard output, the same existing file
+// under two names, or one new file reached two ways ("r.json", "./r.json", a link to it).
+bool sameDestination(const std::string& a, const std::string& b) {
+  if (namesStandardOutput(a) || namesStandardOutput(b)) return namesStandardOutput(a) == namesStandardOutput(b);
+  if (a == b) return true;
+  std::error_code error;
+  if (std::filesystem::equivalent(a, b, error)) return true;
+  return destination(a) == destination(b);
 }
 
 std::string jsonNumber(double x) {

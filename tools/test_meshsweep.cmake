@@ -303,6 +303,12 @@ check(hausdorff_same_file_two_names RC 2 ARGS hausdorff quad.off point.off --jso
   --colors same.out ERR "cannot write to the same file")
 check(hausdorff_same_stdout RC 2 ARGS hausdorff quad.off point.off --json - --colors -
   ERR "cannot write to the same standard output")
+# A dangling link to the JSON file, and standard output under another name (found by review).
+file(CREATE_LINK "linked.json" "${WORK_DIR}/link.json" SYMBOLIC)
+check(hausdorff_same_file_dangling_link RC 2 ARGS hausdorff quad.off point.off --json linked.json
+  --colors link.json ERR "cannot write to the same file")
+check(hausdorff_same_stdout_two_names RC 2 ARGS hausdorff quad.off point.off --json - --colors /dev/stdout
+  ERR "cannot write to the same standard output")
 check(hausdorff_json_stdout_colors RC 0 ARGS hausdorff quad.off point.off --json - --colors colors.ply
   OUT "\"hausdorff\": {\"lower\": 3.74165" ERR "Hausdorff distance in [")
 if(EXISTS "${WORK_DIR}/same.out")
