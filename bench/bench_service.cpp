@@ -245,11 +245,33 @@ bool needsRobustKernel(const Vec3& a, const Vec3& b, const Vec3& c) {
   return !(twice_area_squared > 1e-10 * std::max({ab * ac, ab * bc, ac * bc}));
 }
 
-struct EmbreeQuery {
+// What both callbacks read: the scene's double triangles, which of them need the robust kernel,
+// and the query point.
+struct EmbreeQueryBase {
   const std::vector<Triangle>* triangles;
   const Vec3* positions;
   const uint8_t* robust;
   Vec3 p;
+  // Squared distance from p to triangle t (Ericson's routine; Meshsweeper's for the flagged
+  // needles).
+  double squared(TriangleIndex t) const {
+    const Triangle& tri = (*triangles)[t];
+    const Vec3 &a = positions[tri[0]], &b = positions[tri[1]], &c = positions[tri[2]];
+    return robust[t] ? squaredDistanceToTriangle(p, a, b, c) : ericsonSquaredDistance(p, a, b, c);
+  }
+  // The same, and the closest point's barycentric coordinates v, w on b and c.
+  double closest(TriangleIndex t, double& v, double& w) const {
+    const Triangle& tri = (*triangles)[t];
+    const Vec3 &a = positions[tri[0]], &b = positions[tri[1]], &c = positions[tri[2]];
+    if (!robust[t]) return ericsonClosest(p, a, b, c, v, w);
+    const TriangleClosest hit = closestPointOnTriangle(p, a, b, c);
+    v = hit.barycentric[1];
+    w = hit.barycentric[2];
+    return hit.squared_distance;
+  }
+};
+
+struct EmbreeQuery : EmbreeQueryBase {
   double slack;
   double best_squared;
   TriangleIndex best_triangle;
@@ -258,9 +280,7 @@ struct EmbreeQuery {
 bool embreeCallback(RTCPointQueryFunctionArguments* args) {
   auto* q = static_cast<EmbreeQuery*>(args->userPtr);
   const TriangleIndex t = args->primID;
-  const Triangle& tri = (*q->triangles)[t];
-  const Vec3 &a = q->positions[tri[0]], &b = q->positions[tri[1]], &c = q->positions[tri[2]];
-  const double sq = q->robust[t] ? squaredDistanceToTriangle(q->p, a, b, c) : ericsonSquaredDistance(q->p, a, b, c);
+  const double sq = q->squared(t);
   if (sq < q->best_squared || (sq == q->best_squared && t < q->best_triangle)) {
     q->best_squared = sq;
     q->best_triangle = t;
@@ -281,11 +301,7 @@ struct EmbreeHit {
 
 // Within mode: every triangle at exact distance <= d (the radius never shrinks), with its
 // closest point's barycentric coordinates (what the service returns with each hit).
-struct EmbreeWithin {
-  const std::vector<Triangle>* triangles;
-  const Vec3* positions;
-  const uint8_t* robust;
-  Vec3 p;
+struct EmbreeWithin : EmbreeQueryBase {
   double d;
   std::vector<EmbreeHit>* out;
 };
@@ -293,18 +309,8 @@ struct EmbreeWithin {
 bool embreeWithinCallback(RTCPointQueryFunctionArguments* args) {
   auto* q = static_cast<EmbreeWithin*>(args->userPtr);
   const TriangleIndex t = args->primID;
-  const Triangle& tri = (*q->triangles)[t];
-  const Vec3 &a = q->positions[tri[0]], &b = q->positions[tri[1]], &c = q->positions[tri[2]];
-  double sq, v = 0, w = 0;
-  if (q->robust[t]) {
-    const TriangleClosest closest = closestPointOnTriangle(q->p, a, b, c);
-    sq = closest.squared_distance;
-    v = closest.barycentric[1];
-    w = closest.barycentric[2];
-  } else {
-    sq = ericsonClosest(q->p, a, b, c, v, w);
-  }
-  const double distance = std::sqrt(sq);
+  double v, w;
+  const double distance = std::sqrt(q->closest(t, v, w));
   if (distance <= q->d) q->out->push_back({distance, t, v, w});
   return false;
 }
@@ -359,20 +365,13 @@ class EmbreeScene {
   // Closest triangle to p within `radius` (exact), warm-started from triangle `warm`
   // (kInvalidIndex: none). Returns kInvalidIndex if none within radius.
   TriangleIndex closest(const Vec3& p, double radius, TriangleIndex warm, double& distance) const {
-    EmbreeQuery q{triangles_, positions_.data(), robust_.data(), p, 0, std::numeric_limits<double>::infinity(),
+    EmbreeQuery q{{triangles_, positions_.data(), robust_.data(), p}, 0, std::numeric_limits<double>::infinity(),
                   kInvalidIndex};
     if (warm != kInvalidIndex) {
       const Triangle& t = (*triangles_)[warm];
       radius = std::min(radius, std::sqrt(squaredDistanceToTriangle(p, positions_[t[0]], positions_[t[1]], positions_[t[2]])));
     }
-    RTCPointQuery query;
-    query.x = static_cast<float>(p.x());
-    query.y = static_cast<float>(p.y());
-    query.z = static_cast<float>(p.z());
-    query.time = 0.f;
-    const Vec3 pf(query.x, query.y, query.z);
-    q.slack = vertex_error_ + (pf - p).norm() * (1.0 + 1e-12);
-    query.radius = roundUpToFloat((radius + q.slack) * (1.0 + 1e-6));
+    RTCPointQuery query = pointQuery(p, radius, q.slack);
     RTCPointQueryContext context;
     rtcInitPointQueryContext(&context);
     rtcPointQuery(scene_, &query, &context, embreeCallback, &q);
@@ -383,21 +382,29 @@ class EmbreeScene {
 
   // Every triangle within d of p (exact distances), appended to out as (distance, triangle).
   void within(const Vec3& p, double d, std::vector<EmbreeHit>& out) const {
-    EmbreeWithin q{triangles_, positions_.data(), robust_.data(), p, d, &out};
-    RTCPointQuery query;
-    query.x = static_cast<float>(p.x());
-    query.y = static_cast<float>(p.y());
-    query.z = static_cast<float>(p.z());
-    query.time = 0.f;
-    const Vec3 pf(query.x, query.y, query.z);
-    const double slack = vertex_error_ + (pf - p).norm() * (1.0 + 1e-12);
-    query.radius = roundUpToFloat((d + slack) * (1.0 + 1e-6));
+    EmbreeWithin q{{triangles_, positions_.data(), robust_.data(), p}, d, &out};
+    double slack = 0;
+    RTCPointQuery query = pointQuery(p, d, slack);
     RTCPointQueryContext context;
     rtcInitPointQueryContext(&context);
     rtcPointQuery(scene_, &query, &context, embreeWithinCallback, &q);
   }
 
  private:
+  // A point query at p (float) whose radius covers `radius` around the double p: `slack` is
+  // what the float vertices and the float point may be off by.
+  RTCPointQuery pointQuery(const Vec3& p, double radius, double& slack) const {
+    RTCPointQuery query;
+    query.x = static_cast<float>(p.x());
+    query.y = static_cast<float>(p.y());
+    query.z = static_cast<float>(p.z());
+    query.time = 0.f;
+    const Vec3 pf(query.x, query.y, query.z);
+    slack = vertex_error_ + (pf - p).norm() * (1.0 + 1e-12);
+    query.radius = roundUpToFloat((radius + slack) * (1.0 + 1e-6));
+    return query;
+  }
+
   void writeVertices() {
     double worst = 0;
     for (size_t v = 0; v < positions_.size(); ++v) {

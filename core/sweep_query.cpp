@@ -635,6 +635,31 @@ void trackMotion(CoherentState& state, const Vec3& p, double drift) {
   }
 }
 
+// How far the faces may have come toward p since the state's set was gathered: the point's
+// distance from the anchor plus the growth of the lineage's drift.
+double movedSinceSet(const CoherentState& state, const Vec3& p, const TreeGeometry& g) {
+  return (p - state.anchor).norm() + (g.drift - state.drift_at);
+}
+
+// Where a rebuilt set is gathered: its margin 2R, R = reach_steps mean steps (at least 1e-6 of
+// the mesh size: a stationary point still gets a certificate), and lead_steps mean steps ahead
+// when that lies within the margin (on a steady path the set lasts about twice as long; on a
+// path that turns back the mean velocity, and the lead, shrink). p must still be certified by
+// a set gathered ahead, else it is gathered at p.
+struct SetPlan {
+  double reach;
+  Vec3 lead;
+  bool ahead;  // gather at p + lead first
+};
+SetPlan planSet(const CoherentState& state, const TreeGeometry& g, bool same_lineage) {
+  SetPlan plan;
+  plan.reach = 2.0 * std::max(static_cast<double>(state.reach_steps) * state.mean_step, 1e-6 / g.box_scale);
+  plan.lead = static_cast<double>(state.lead_steps) * state.mean_velocity.cast<double>();
+  const double ahead = same_lineage ? plan.lead.norm() : 0.0;
+  plan.ahead = ahead > 0 && ahead < plan.reach;
+  return plan;
+}
+
 }  // namespace
 
 ClosestPoint QueryStream::closestCoherent(const Vec3& p, CoherentState& state, bool* certified_out,
@@ -659,10 +684,7 @@ ClosestPoint QueryStream::closestCoherent(const Vec3& p, CoherentState& state, b
   TriangleIndex face = kInvalidIndex;
   bool certified = false;
   double best2 = kInf;
-  if (same_lineage && state.has_set) {
-    const double moved = (p - state.anchor).norm() + (g.drift - state.drift_at);
-    certified = testSet(state, p, moved, within, best2, face);
-  }
+  if (same_lineage && state.has_set) certified = testSet(state, p, movedSinceSet(state, p, g), within, best2, face);
   if (!certified) {
     // Start from the best face of the set just tested (no distance to recompute), else the
     // previous face's distance; or the cap if smaller.
@@ -683,17 +705,11 @@ ClosestPoint QueryStream::closestCoherent(const Vec3& p, CoherentState& state, b
     }
     state.has_set = false;
     if (state.reach_steps > 0) {
-      // A stationary point still gets a certificate: a reach of at least 1e-6 of the mesh size.
-      const double reach = 2.0 * std::max(static_cast<double>(state.reach_steps) * state.mean_step,
-                                          1e-6 / g.box_scale);
-      // Gathered lead_steps mean steps ahead, the set lasts about twice as long on a steady
-      // path (on a path that turns back the mean velocity, and the lead, shrink); p must still
-      // be certified by it, else the set is gathered at p.
-      const Vec3 lead = static_cast<double>(state.lead_steps) * state.mean_velocity.cast<double>();
-      const double ahead = same_lineage ? lead.norm() : 0.0;
+      const SetPlan plan = planSet(state, g, same_lineage);
+      const double reach = plan.reach;
       bool answered = false;
-      if (ahead > 0 && ahead < reach) {
-        const Vec3 anchor = p + lead;
+      if (plan.ahead) {
+        const Vec3 anchor = p + plan.lead;
         double anchor2 = within2;
         TriangleIndex anchor_face = kInvalidIndex;
         if (face != kInvalidIndex) {
@@ -773,10 +789,7 @@ void QueryStream::withinCoherent(const Vec3& p, double d, CoherentState& state, 
   const bool same_lineage = state.lineage != 0 && state.lineage == g.lineage;
   if (same_lineage) trackMotion(state, p, g.drift);
   bool certified = false;
-  if (same_lineage && state.has_set) {
-    const double moved = (p - state.anchor).norm() + (g.drift - state.drift_at);
-    certified = testSetWithin(state, p, moved, d, out);
-  }
+  if (same_lineage && state.has_set) certified = testSetWithin(state, p, movedSinceSet(state, p, g), d, out);
   bool answered = certified;
   // A set that did not certify this step is dropped (it may belong to another lineage, which
   // the state is about to take): only a set gathered now may answer later steps.
@@ -785,16 +798,12 @@ void QueryStream::withinCoherent(const Vec3& p, double d, CoherentState& state, 
     if (state.within_wait > 0) {
       --state.within_wait;
     } else {
-      // Gathered within d + 2R, lead_steps mean steps ahead when that is within 2R (p must
-      // still be certified by it), else at p.
-      const double reach = 2.0 * std::max(static_cast<double>(state.reach_steps) * state.mean_step,
-                                          1e-6 / g.box_scale);
-      const double radius = d * (1 + 1e-9) + reach;
-      const Vec3 lead = static_cast<double>(state.lead_steps) * state.mean_velocity.cast<double>();
-      const double ahead = same_lineage ? lead.norm() : 0.0;
+      // Gathered within d + 2R (planSet), ahead of p first.
+      const SetPlan plan = planSet(state, g, same_lineage);
+      const double radius = d * (1 + 1e-9) + plan.reach;
       TriangleIndex ignored = kInvalidIndex;
-      if (ahead > 0 && ahead < reach) {
-        const Vec3 anchor = p + lead;
+      if (plan.ahead) {
+        const Vec3 anchor = p + plan.lead;
         storeSet(anchor, gatherCandidates(anchor, 0.0, radius, kCoherentSetSize, ignored, true), state);
         answered = state.has_set && testSetWithin(state, p, (p - anchor).norm(), d, out);
       }
@@ -884,7 +893,6 @@ ClosestPoint QueryStream::closestWithin(const Vec3& p, double tolerance) {
   if (upper_face != kInvalidIndex) hit = hitOn(upper_face, p);
   ClosestPoint out = upperAnswer(h, g.positions, upper_face != kInvalidIndex ? &hit : nullptr,
                                  upper_vertex, upper, lower);
-  if (tolerance <= 0) canonicalExact(p, out);
   out.counters = counters_;
   return out;
 }

@@ -221,10 +221,9 @@ struct LocalResult {
   int feature;     // rotated frame
 };
 
-template <bool kDetails>
-inline double closestImpl(const Vec3& pe, const Vec3& ae, const Vec3& be, const Vec3& ce,
-                          TriangleClosest* out) {
-  const V3<double> p{pe.x(), pe.y(), pe.z()};
+// The rotated corners and squared edge lengths of a triangle (the rest of the frame is
+// fillFrame's); r receives the rotation: local corner i is corner (i + r) % 3.
+inline Frame<double> rotatedFrame(const Vec3& ae, const Vec3& be, const Vec3& ce, int& r) {
   const V3<double> corner[3] = {{ae.x(), ae.y(), ae.z()},
                                 {be.x(), be.y(), be.z()},
                                 {ce.x(), ce.y(), ce.z()}};
@@ -233,8 +232,8 @@ inline double closestImpl(const Vec3& pe, const Vec3& ae, const Vec3& be, const 
   const V3<double> e1 = corner[2] - corner[1];
   const V3<double> e2 = corner[0] - corner[2];
   const double l[3] = {dot(e0, e0), dot(e1, e1), dot(e2, e2)};
-  // Rotation r: local corner i is corner (i + r) % 3; a is opposite the longest edge.
-  const int r = (l[1] >= l[2] && l[1] >= l[0]) ? 0 : (l[2] >= l[0] ? 1 : 2);
+  // a is opposite the longest edge.
+  r = (l[1] >= l[2] && l[1] >= l[0]) ? 0 : (l[2] >= l[0] ? 1 : 2);
   Frame<double> f;
   f.a = corner[r];
   f.b = corner[(r + 1) % 3];
@@ -242,6 +241,15 @@ inline double closestImpl(const Vec3& pe, const Vec3& ae, const Vec3& be, const 
   f.lab = l[r];
   f.lbc = l[(r + 1) % 3];
   f.lac = l[(r + 2) % 3];
+  return f;
+}
+
+template <bool kDetails>
+inline double closestImpl(const Vec3& pe, const Vec3& ae, const Vec3& be, const Vec3& ce,
+                          TriangleClosest* out) {
+  const V3<double> p{pe.x(), pe.y(), pe.z()};
+  int r = 0;
+  Frame<double> f = rotatedFrame(ae, be, ce, r);
   fillFrame(p, f);
 
   LocalResult res{};
@@ -581,17 +589,10 @@ double squaredDistanceToTriangle(const Vec3& p, const Vec3& a, const Vec3& b, co
 }
 
 bool isDegenerateTriangle(const Vec3& ae, const Vec3& be, const Vec3& ce) {
-  // The rotation and determinant of closestImpl: a opposite the longest edge.
-  const V3<double> corner[3] = {{ae.x(), ae.y(), ae.z()}, {be.x(), be.y(), be.z()}, {ce.x(), ce.y(), ce.z()}};
-  const V3<double> e0 = corner[1] - corner[0];
-  const V3<double> e1 = corner[2] - corner[1];
-  const V3<double> e2 = corner[0] - corner[2];
-  const double l[3] = {dot(e0, e0), dot(e1, e1), dot(e2, e2)};
-  const int r = (l[1] >= l[2] && l[1] >= l[0]) ? 0 : (l[2] >= l[0] ? 1 : 2);
-  const V3<double> ab = corner[(r + 1) % 3] - corner[r];
-  const V3<double> ac = corner[(r + 2) % 3] - corner[r];
-  const V3<double> n = cross(ab, ac);
-  return isDegenerate(dot(n, n), l[r], l[(r + 2) % 3]);
+  int r = 0;
+  const Frame<double> f = rotatedFrame(ae, be, ce, r);  // closestImpl's frame and test
+  const V3<double> n = cross(f.b - f.a, f.c - f.a);
+  return isDegenerate(dot(n, n), f.lab, f.lac);
 }
 
 void squaredDistancesToBlock(const Vec3& p, const TriangleBlock8& block, double out[8]) {
