@@ -37,6 +37,16 @@ Vec3 vertexPseudonormal(const Mesh& mesh, const Vec3* positions, VertexIndex ver
   return sum;
 }
 
+// Six times the volume the faces enclose at `positions`, summed as tetrahedra from o (any
+// point: the sum of a closed surface does not depend on it; one near the surface keeps it
+// accurate). Positive when the faces point outward.
+double enclosedVolume6(const Mesh& mesh, const Vec3* positions, const Vec3& o) {
+  double volume6 = 0;
+  for (const Triangle& t : mesh.triangles)
+    volume6 += (positions[t[0]] - o).dot((positions[t[1]] - o).cross(positions[t[2]] - o));
+  return volume6;
+}
+
 }  // namespace
 
 Vec3 unitFaceNormal(const Vec3& a, const Vec3& b, const Vec3& c) {
@@ -169,10 +179,7 @@ std::shared_ptr<const BodyShape> BodyShape::build(std::shared_ptr<const Hierarch
   // over the faces, about the box's centre). It is the same solid: its normals are flipped, so
   // that signs still say inside and outside. One enclosing no volume has no inside.
   if (reason.empty()) {
-    const Vec3 o = 0.5 * (shape->rest_lower_ + shape->rest_upper_);
-    double volume6 = 0;
-    for (const Triangle& t : mesh.triangles)
-      volume6 += (pos[t[0]] - o).dot((pos[t[1]] - o).cross(pos[t[2]] - o));
+    const double volume6 = enclosedVolume6(mesh, pos.data(), 0.5 * (shape->rest_lower_ + shape->rest_upper_));
     if (!(volume6 != 0)) reason = "the surface encloses no volume";
     shape->orientation_ = volume6 < 0 ? -1.0 : 1.0;
     for (Vec3& n : shape->face_normals_) n *= shape->orientation_;
@@ -213,8 +220,19 @@ void BodyShape::prefetchRestPseudonormal(TriangleIndex triangle, Feature feature
   __builtin_prefetch(reinterpret_cast<const char*>(where + 1) - 1);  // a Vec3 may straddle two lines
 }
 
-Vec3 BodyShape::pseudonormal(TriangleIndex triangle, Feature feature, const Vec3* positions) const {
-  return orientation_ * pseudonormalAsGiven(triangle, feature, positions);
+Vec3 BodyShape::pseudonormal(TriangleIndex triangle, Feature feature, const Vec3* positions,
+                              double orientation) const {
+  return orientation * pseudonormalAsGiven(triangle, feature, positions);
+}
+
+double BodyShape::orientationAt(const Vec3* positions) const {
+  const Mesh& m = mesh();
+  if (!closed_ || m.triangles.empty()) return orientation_;
+  // About a vertex of the surface: the sum stays well conditioned wherever the body is placed.
+  const double volume6 = enclosedVolume6(m, positions, positions[m.triangles[0][0]]);
+  if (volume6 > 0) return 1.0;
+  if (volume6 < 0) return -1.0;
+  return orientation_;
 }
 
 Vec3 BodyShape::pseudonormalAsGiven(TriangleIndex triangle, Feature feature, const Vec3* positions) const {

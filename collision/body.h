@@ -18,7 +18,9 @@
 //    its faces, each weighted by the face's angle at the vertex. For a closed surface and a
 //    point p with closest surface point c on feature f, sign((p - c) . n_f) is the sign of the
 //    distance (outside positive). Deformed positions use the same formulas on demand
-//    (pseudonormal()): only the hit's feature is evaluated.
+//    (pseudonormal()): only the hit's feature is evaluated. Other positions can turn the
+//    surface inside out (a mirror image): their orientation (orientationAt()) is that of the
+//    volume they enclose, not the rest positions'.
 #include "core/hierarchy.h"
 #include "core/triangle_distance.h"
 
@@ -68,9 +70,17 @@ class BodyShape {
   // Starts loading what restPseudonormal(triangle, feature) reads (a cache hint, no effect).
   void prefetchRestPseudonormal(TriangleIndex triangle, Feature feature) const;
   // The same at other positions ([vertex], as many as the mesh has, same connectivity),
-  // computed from the feature's faces only. Equals restPseudonormal() at the rest positions
-  // up to rounding.
-  Vec3 pseudonormal(TriangleIndex triangle, Feature feature, const Vec3* positions) const;
+  // computed from the feature's faces only, for positions of the given orientation (+1: the
+  // faces point outward as given, -1: inward; orientationAt()). Equals restPseudonormal() at
+  // the rest positions (with their orientation) up to rounding.
+  Vec3 pseudonormal(TriangleIndex triangle, Feature feature, const Vec3* positions, double orientation) const;
+  // +1 when the closed surface at `positions` encloses a positive volume with its faces as
+  // given (they point outward), -1 when a negative one (inward: a mirror image of the rest
+  // positions, or an inward mesh); the rest orientation when the volume is zero or not finite
+  // (no inside: signs mean nothing there), and for a shape that is not closed(). O(faces).
+  double orientationAt(const Vec3* positions) const;
+  // The rest positions' orientation (inward() ? -1 : +1).
+  double restOrientation() const { return orientation_; }
 
   // Memory of the tables in bytes (not counting the hierarchy).
   size_t bytes() const;
@@ -79,7 +89,7 @@ class BodyShape {
   BodyShape() = default;
   // The table entry restPseudonormal() returns.
   const Vec3& restPseudonormalEntry(TriangleIndex triangle, Feature feature) const;
-  // pseudonormal() for the faces' own orientation.
+  // The pseudonormal for the faces' own orientation.
   Vec3 pseudonormalAsGiven(TriangleIndex triangle, Feature feature, const Vec3* positions) const;
   double orientation_ = 1;  // -1: faces point inward, normals flipped
   std::shared_ptr<const Hierarchy> hierarchy_;

@@ -101,6 +101,9 @@ struct Body {
   TreeGeometry rest;  // the hierarchy's rest geometry (rigid bodies, in the body frame)
   Box3 box;
   bool box_dirty = true;
+  // The placement's orientation (BodyShape::orientationAt), refreshed with the box: a
+  // key-framed or deforming closed body can be placed as a mirror image of its mesh.
+  double orientation = 1;
 
   // What the body's streams read: null (rest geometry, body frame) for rigid bodies.
   const TreeGeometry* geometry() const {
@@ -127,6 +130,7 @@ struct BestHit {
   uint32_t slot = 0;
   ClosestPoint c;
   Vec3 q = Vec3::Zero();  // the point in the body's frame
+  double touch = 0;       // surfaceRounding() at q
 };
 
 // Per-thread scratch: one stream per body slot, candidate lists, rebuild buffers.
@@ -240,6 +244,7 @@ struct DistanceService::Impl {
     b.generation = bodies[slot].generation + 1;
     b.alive = true;
     b.box_dirty = true;
+    b.orientation = b.shape->restOrientation();
     bodies[slot] = std::move(b);
     broadphase.set(slot, Box3{});
     ++live;
@@ -272,6 +277,7 @@ struct DistanceService::Impl {
         box.lower = box.lower.cwiseMin(x);
         box.upper = box.upper.cwiseMax(x);
       }
+      if (b.shape->closed()) b.orientation = b.shape->orientationAt(pos.data());
     }
     b.box = box;
   }
@@ -307,12 +313,27 @@ struct DistanceService::Impl {
     return *ss.stream;
   }
 
+  // How far from the surface a computed distance at q (the point p in the body's frame) can
+  // be made of rounding alone: 16 eps times the coordinates involved (and, for a rigid body,
+  // those of p and of the pose's translation, whose difference q carries). A point exactly on
+  // a face is answered 1e-17 away at coordinates of 0.5, say, with a closest point one ulp
+  // aside. A hit this close is on the surface: it counts as within any max_distance, and its
+  // direction and sign come from its feature's pseudonormal, not from that offset.
+  double surfaceRounding(uint32_t slot, const Vec3& p, const Vec3& q) const {
+    const Body& b = bodies[slot];
+    double scale = q.cwiseAbs().maxCoeff();
+    if (b.kind == BodyKind::kRigid)
+      scale += p.cwiseAbs().maxCoeff() + b.rigid->pose().translation().cwiseAbs().maxCoeff();
+    return 16 * std::numeric_limits<double>::epsilon() * scale;
+  }
+
   // The hit of a query point q (in the body's frame) on `face` of body `slot`: closest point
-  // c (body frame), feature, barycentric coordinates, distance.
+  // c (body frame), feature, barycentric coordinates, distance; `touch` is surfaceRounding()
+  // at q (a hit no farther is on the surface).
   // `signed_hit` false: the caller sets the sign (signLikeClosest), so the pseudonormal is only
-  // needed for the direction at distance 0.
+  // needed for the direction on the surface.
   DistanceHit makeHit(uint32_t slot, const Vec3& q, TriangleIndex face, Feature feature, const Vec3& c,
-                      const Vec3& barycentric, double distance, bool signed_hit = true) const {
+                      const Vec3& barycentric, double distance, double touch, bool signed_hit = true) const {
     const Body& b = bodies[slot];
     const BodyShape& shape = *b.shape;
     DistanceHit hit;
@@ -324,14 +345,17 @@ struct DistanceService::Impl {
     hit.closed_body = shape.closed();
     const Vec3 offset = q - c;
     const double length = offset.norm();
-    // The pseudonormal gives a closed body's sign, and the direction at distance 0; an open
+    // On the surface (up to rounding) the offset's direction is noise: the pseudonormal gives
+    // the direction, and the point is outside.
+    const bool on_surface = !(distance > touch) || !(length > 0);
+    // The pseudonormal gives a closed body's sign, and the direction on the surface; an open
     // moving body skips it otherwise (evaluated at the current positions, it is not free).
     Vec3 normal = Vec3::Zero();
-    if ((signed_hit && hit.closed_body) || !(length > 0))
+    if ((signed_hit && hit.closed_body) || on_surface)
       normal = b.kind == BodyKind::kRigid ? shape.restPseudonormal(face, feature)
-                                          : shape.pseudonormal(face, feature, b.positions());
+                                          : shape.pseudonormal(face, feature, b.positions(), b.orientation);
     Vec3 direction = Vec3::Zero();
-    if (length > 0) {
+    if (!on_surface) {
       direction = offset / length;
     } else {
       const double n = normal.norm();
@@ -340,7 +364,7 @@ struct DistanceService::Impl {
     if (!hit.closed_body)
       hit.sign = HitSign::kUnsigned;
     else
-      hit.sign = length > 0 && offset.dot(normal) < 0 ? HitSign::kInside : HitSign::kOutside;
+      hit.sign = !on_surface && offset.dot(normal) < 0 ? HitSign::kInside : HitSign::kOutside;
     hit.signed_distance = hit.sign == HitSign::kInside ? -distance : distance;
     if (b.kind == BodyKind::kRigid) {
       hit.point = b.rigid->toWorld(c);
@@ -466,14 +490,15 @@ struct DistanceService::Impl {
         // looking farther than d, and its state's certificate covers the next steps.
         if (pair.state.lineage != 0) ++stats.warm_pairs;
         bool certified = false;
-        const ClosestPoint c = stream(s, pair.slot).closestCoherent(q, pair.state, &certified, d);
+        const double touch = surfaceRounding(pair.slot, p, q);
+        const ClosestPoint c = stream(s, pair.slot).closestCoherent(q, pair.state, &certified, std::max(d, touch));
         stats.certified_pairs += certified;
         stats.out_of_reach_pairs += c.triangle == kInvalidIndex;
         stats.triangles_tested += c.counters.triangles_tested;
         s.streams[pair.slot].leaves_tested += c.counters.leaves_tested;
-        if (c.distance <= d && c.distance < best) {
+        if ((c.distance <= d || c.distance <= touch) && c.distance < best) {
           best = c.distance;
-          hit = {pair.slot, c, q};
+          hit = {pair.slot, c, q, touch};
         }
       }
       if (hit.c.triangle != kInvalidIndex && bodies[hit.slot].kind == BodyKind::kRigid)
@@ -484,7 +509,7 @@ struct DistanceService::Impl {
       if (hit.c.triangle == kInvalidIndex) continue;  // set only for a hit within d
       const size_t i = first + j;
       out.hits_[i] = makeHit(hit.slot, hit.q, hit.c.triangle, hit.c.feature, hit.c.point, hit.c.barycentric,
-                             hit.c.distance);
+                             hit.c.distance, hit.touch);
       out.count_[i] = 1;
       ++stats.hits;
     }
@@ -520,7 +545,8 @@ struct DistanceService::Impl {
         QueryStream& qs = stream(s, slot);
         if (pair.state.lineage != 0) ++stats.warm_pairs;
         bool certified = false;
-        qs.withinCoherent(q, d, pair.state, s.triangle_hits, &certified);
+        const double touch = surfaceRounding(slot, p, q);  // hits on the surface count for any d
+        qs.withinCoherent(q, std::max(d, touch), pair.state, s.triangle_hits, &certified);
         stats.certified_pairs += certified;
         stats.triangles_tested += qs.counters().triangles_tested;
         s.streams[slot].leaves_tested += qs.counters().leaves_tested;
@@ -528,7 +554,7 @@ struct DistanceService::Impl {
         if (s.triangle_hits.empty()) continue;
         // The first, closest hit gives every hit of this body its sign (signLikeClosest).
         for (const TriangleHit& t : s.triangle_hits)
-          s.point_hits.push_back(makeHit(slot, q, t.triangle, t.feature, t.point, t.barycentric, t.distance,
+          s.point_hits.push_back(makeHit(slot, q, t.triangle, t.feature, t.point, t.barycentric, t.distance, touch,
                                          s.point_hits.size() == from));
         signLikeClosest(s.point_hits.data() + from, s.point_hits.data() + s.point_hits.size());
         // Each body's hits come sorted (by distance, then triangle): merge the runs.

@@ -89,9 +89,11 @@ struct DistanceHit {
   double signed_distance = 0;              // -distance inside a closed body, else +distance
   Vec3 point = Vec3::Zero();               // closest point on the body's surface
   Vec3 barycentric = Vec3::Zero();         // point = b0*A + b1*B + b2*C of the triangle
-  // Unit vector from `point` to the query point. At distance 0, the feature's pseudonormal
-  // (outward for a closed body), normalised; the zero vector only if that pseudonormal is zero
-  // (a feature whose faces all have zero area).
+  // Unit vector from `point` to the query point. On the surface (a distance of at most 16 eps
+  // times the coordinates involved, which rounding alone can make of a point lying exactly on
+  // a face: the offset's direction is noise there), the feature's pseudonormal (outward for a
+  // closed body, whose sign is then kOutside), normalised; the zero vector only if that
+  // pseudonormal is zero (a feature whose faces all have zero area).
   Vec3 direction = Vec3::Zero();
 };
 
@@ -268,7 +270,8 @@ class DistanceService {
   // ---- Queries ---------------------------------------------------------------------------
   // Answers every point (one row each) against every body within `max_distance` (>= 0;
   // +infinity allowed): kClosest keeps the closest hit over all bodies, kWithin every triangle
-  // within the distance. Points with a NaN or infinite coordinate get PointStatus::kNotFinite,
+  // within the distance; a hit on the surface up to rounding (see DistanceHit::direction)
+  // counts as within any max_distance, 0 included, with its distance as computed. Points with a NaN or infinite coordinate get PointStatus::kNotFinite,
   // finite ones beyond 1e150 kOutOfRange, and no hits (the step goes on). Throws std::invalid_argument if max_distance is NaN or negative.
   // Results are written into `out` (its memory reused).
   void step(PointsRef points, double max_distance, QueryMode mode, StepResult& out);

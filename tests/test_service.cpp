@@ -31,6 +31,7 @@
 #include <cmath>
 #include <cstring>
 #include <filesystem>
+#include <functional>
 #include <limits>
 #include <map>
 #include <memory>
@@ -551,6 +552,143 @@ TEST_CASE("open meshes answer unsigned; distance 0 uses the feature's pseudonorm
   CHECK(m.closest(1)->direction.isApprox(Vec3(0, 0, 1), 1e-12));
 }
 
+// Found by review: the orientation of a closed mesh was decided once, at its rest positions,
+// so a key-framed or deforming body placed as a mirror image (the same solid, its faces now
+// pointing inward) had every sign reversed.
+TEST_CASE("a closed body placed as a mirror image keeps inside inside", "[service][sign]") {
+  const Mesh torus = scenes::torus(1.0, 0.35, 32, 16);
+  std::vector<Vec3> mirrored = torus.positions;
+  for (Vec3& x : mirrored) x.x() = -x.x() + 0.125;  // x -> -x (and off the axis, so nothing coincides)
+  const Mesh world = withPositions(torus, mirrored);
+  DistanceService service;
+  const auto hierarchy = service.hierarchyFor(torus);
+  REQUIRE(service.shapeFor(hierarchy)->closed());
+  CHECK_FALSE(service.shapeFor(hierarchy)->inward());
+  CHECK(service.shapeFor(hierarchy)->orientationAt(mirrored.data()) == -1.0);
+  CHECK(service.shapeFor(hierarchy)->orientationAt(torus.positions.data()) == 1.0);
+
+  std::vector<Vec3> points = scenes::nearSurfacePoints(world, 400, 0.02, 5);
+  auto checkSigns = [&](DistanceService& s, const char* what) {
+    INFO(what);
+    const StepResult r = s.step(toMatrix(points), kInf, QueryMode::kClosest);
+    Failures failures(std::string("mirrored sign, ") + what);
+    size_t inside = 0;
+    for (size_t i = 0; i < points.size(); ++i) {
+      const DistanceHit* hit = r.closest(i);
+      REQUIRE(hit);
+      const double w = windingNumber(world, points[i]);
+      if (hit->distance < 1e-9 || std::abs(std::abs(w) - 0.5) < 0.25) continue;
+      const bool inside_expected = std::abs(w) > 0.5;
+      inside += inside_expected;
+      failures.check(hit->sign == (inside_expected ? HitSign::kInside : HitSign::kOutside), [&] {
+        return "point " + text(points[i]) + ": winding number " + std::to_string(w) + ", sign " +
+               std::to_string(int(hit->sign));
+      });
+      // Outside, the direction points away from the solid: along the outward pseudonormal.
+      failures.check(hit->direction.dot(points[i] - hit->point) > 0, [&] { return "direction " + text(hit->direction); });
+    }
+    CHECK(inside > points.size() / 5);
+    CHECK(failures.checks() > points.size());
+  };
+  {
+    DistanceService s;
+    s.addDeforming(s.hierarchyFor(torus), 0.0, mirrored);
+    checkSigns(s, "deforming, mirrored from the start");
+  }
+  {
+    DistanceService s;
+    const BodyHandle b = s.addDeforming(s.hierarchyFor(torus), 0.1);
+    s.step(toMatrix(points), kInf, QueryMode::kClosest);  // at rest first
+    s.setPositions(b, mirrored);
+    checkSigns(s, "deforming, mirrored by setPositions");
+  }
+  {
+    DistanceService s;
+    const BodyHandle b = s.addKeyframed(s.hierarchyFor(torus), {torus.positions, mirrored}, 0.0);
+    s.setTime(b, 1.0);
+    checkSigns(s, "key-framed, a mirrored frame");
+  }
+}
+
+// Found by review: a point lying exactly on a face was answered about 1e-17 away (the closest
+// point one ulp aside), so it was no hit at max_distance 0 and its direction lay in the
+// surface; a simulator pushing along it would slide the point sideways.
+TEST_CASE("points on the surface are hits at distance 0 with the pseudonormal's direction", "[service][sign]") {
+  Mesh cube;  // [-0.5, 0.5]^3, faces outward
+  for (int i = 0; i < 8; ++i) cube.positions.push_back(Vec3(i & 1 ? 0.5 : -0.5, i & 2 ? 0.5 : -0.5, i & 4 ? 0.5 : -0.5));
+  cube.triangles = {{0, 2, 1}, {1, 2, 3}, {4, 5, 6}, {5, 7, 6}, {0, 1, 4}, {1, 5, 4},
+                    {2, 6, 3}, {3, 6, 7}, {0, 4, 2}, {2, 4, 6}, {1, 3, 5}, {3, 7, 5}};
+  Random random(17);
+  // Points on the face x = 0.5, in the body's frame.
+  std::vector<Vec3> on_face;
+  for (int i = 0; i < 300; ++i) on_face.push_back(Vec3(0.5, random.uniform(-0.45, 0.45), random.uniform(-0.45, 0.45)));
+  const Eigen::Isometry3d pose = makePose(0.3, Vec3(1, 2, 3), Vec3(0.25, -7, 1e3));
+  struct Placement {
+    const char* what;
+    std::function<BodyHandle(DistanceService&)> add;
+    Eigen::Isometry3d to_world;
+  };
+  const std::vector<Placement> placements = {
+      {"rigid", [&](DistanceService& s) { return s.addRigid(s.hierarchyFor(cube)); }, Eigen::Isometry3d::Identity()},
+      {"rigid, posed", [&](DistanceService& s) { return s.addRigid(s.hierarchyFor(cube), pose); }, pose},
+      {"deforming", [&](DistanceService& s) { return s.addDeforming(s.hierarchyFor(cube), 0.0); },
+       Eigen::Isometry3d::Identity()},
+      {"key-framed", [&](DistanceService& s) { return s.addKeyframed(s.hierarchyFor(cube), {cube.positions}, 0.0); },
+       Eigen::Isometry3d::Identity()}};
+  for (const Placement& placement : placements) {
+    INFO(placement.what);
+    DistanceService service;
+    placement.add(service);
+    const std::vector<Vec3> points = transformed(on_face, placement.to_world);
+    const Vec3 outward = placement.to_world.linear() * Vec3(1, 0, 0);
+    const double rounding = 1e-14 * (1 + placement.to_world.translation().norm());
+    for (QueryMode mode : {QueryMode::kClosest, QueryMode::kWithin}) {
+      const StepResult r = service.step(toMatrix(points), 0.0, mode);
+      Failures failures("on the surface");
+      for (size_t i = 0; i < points.size(); ++i) {
+        const DistanceHit* hit = mode == QueryMode::kClosest ? r.closest(i) : (r.hits(i).empty() ? nullptr : &r.hits(i)[0]);
+        failures.check(hit != nullptr, [&] { return "no hit at " + text(points[i]); });
+        if (!hit) continue;
+        failures.check(hit->distance <= rounding && hit->sign == HitSign::kOutside &&
+                           (hit->direction - outward).norm() < 1e-12,
+                       [&] {
+                         return "point " + text(points[i]) + ": distance " + num(hit->distance) + ", direction " +
+                                text(hit->direction) + ", sign " + std::to_string(int(hit->sign));
+                       });
+      }
+      CHECK(failures.checks() == 2 * points.size());  // every point had a hit
+    }
+  }
+
+  // A point moved onto its closest point and asked again: a hit at max_distance 0 whose
+  // direction agrees with the first one (the same face normal; at an edge or a vertex, the
+  // pseudonormal, still pointing away from the solid).
+  const Mesh sphere = scenes::icosphere(3, 1.0);
+  DistanceService service;
+  service.addRigid(service.hierarchyFor(sphere), makePose(0.7, Vec3(0, 1, 1), Vec3(0.5, 0.25, -3)));
+  std::vector<Vec3> outside;
+  for (int i = 0; i < 500; ++i) outside.push_back(Vec3(0.5, 0.25, -3) + random.uniform(1.01, 1.2) * Vec3(random.uniform(-1, 1), random.uniform(-1, 1), random.uniform(-1, 1)).normalized());
+  const StepResult first = service.step(toMatrix(outside), kInf, QueryMode::kClosest);
+  std::vector<Vec3> projected;
+  for (size_t i = 0; i < outside.size(); ++i) projected.push_back(first.closest(i)->point);
+  const StepResult again = service.step(toMatrix(projected), 0.0, QueryMode::kClosest);
+  Failures failures("projected and asked again");
+  size_t faces = 0;
+  for (size_t i = 0; i < projected.size(); ++i) {
+    const DistanceHit* hit = again.closest(i);
+    failures.check(hit != nullptr, [&] { return "no hit at " + text(projected[i]); });
+    if (!hit) continue;
+    const Vec3& before = first.closest(i)->direction;
+    const bool face = first.closest(i)->feature == Feature::kFace && hit->feature == Feature::kFace &&
+                      hit->triangle == first.closest(i)->triangle;
+    faces += face;
+    failures.check(hit->sign == HitSign::kOutside && std::abs(hit->direction.norm() - 1) < 1e-12 &&
+                       hit->direction.dot(before) > 0 && (!face || (hit->direction - before).norm() < 1e-9),
+                   [&] { return "direction " + text(hit->direction) + " after " + text(before); });
+  }
+  CHECK(faces > projected.size() / 2);
+}
+
 TEST_CASE("pseudonormals on demand equal the precomputed rest tables", "[service][sign]") {
   for (const Mesh& mesh : {scenes::torus(1.0, 0.3, 12, 7), scenes::icosphere(1), scenes::gridPlane(3)}) {
     INFO(mesh.name);
@@ -561,7 +699,7 @@ TEST_CASE("pseudonormals on demand equal the precomputed rest tables", "[service
     for (TriangleIndex t = 0; t < mesh.triangles.size(); ++t)
       for (Feature f : features) {
         const Vec3 a = shape->restPseudonormal(t, f);
-        const Vec3 b = shape->pseudonormal(t, f, mesh.positions.data());
+        const Vec3 b = shape->pseudonormal(t, f, mesh.positions.data(), shape->orientationAt(mesh.positions.data()));
         failures.check((a - b).norm() <= 1e-12 * std::max(1.0, a.norm()), [&] { return text(a) + " vs " + text(b); });
       }
     // Closed meshes: every vertex pseudonormal points away from the centre (convex shapes).
