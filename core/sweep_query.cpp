@@ -135,6 +135,17 @@ inline double boxLowerBound(float d2, double inv_scale) {
   return std::sqrt(static_cast<double>(d2) * (1 - kBoxSlack)) * inv_scale;
 }
 
+// Whether a face at squared distance d2 (index f) comes before the best so far (squared
+// distance best2, index best): by distance, the square root hitOn() reports (two squared
+// distances an ulp apart can have one root), ties to the lowest index, as kClosest() and the
+// brute force order them. Only near-ties take the roots.
+inline bool closerFace(double d2, TriangleIndex f, double best2, TriangleIndex best) {
+  if (d2 < best2 * (1 - 1e-15)) return true;
+  if (!(d2 <= best2 * (1 + 1e-15))) return false;
+  const double a = std::sqrt(d2), b = std::sqrt(best2);
+  return a < b || (a == b && f < best);
+}
+
 void fillFromHit(ClosestPoint& out, const TriangleHit& hit) {
   out.distance = out.lower = out.upper = hit.distance;
   out.point = hit.point;
@@ -319,9 +330,9 @@ double QueryStream::depthFirst(const Vec3& p, double start2, double reach, Trian
       const uint32_t used = testLeaf(leaf, p, exact);
       for (uint32_t lane = 0; lane < used; ++lane) {
         // Ties go to the lowest face index, as in testSet: the answer does not depend on the
-        // order of the search, the warm start or a cached set.
+        // order of the search, the warm start or a cached set (closerFace).
         const TriangleIndex f = lanes[8 * leaf + lane];
-        if (exact[lane] < best2 || (exact[lane] == best2 && f < best_face)) {
+        if (closerFace(exact[lane], f, best2, best_face)) {
           best2 = exact[lane];
           best_face = f;
         }
@@ -516,7 +527,7 @@ ClosestPoint QueryStream::closestCoherent(const Vec3& p) {
         const size_t lanes = std::min<size_t>(8, count - 8 * b);
         for (size_t lane = 0; lane < lanes; ++lane) {
           const TriangleIndex f = set_faces_[8 * b + lane];
-          if (exact[lane] < best2 || (exact[lane] == best2 && f < face)) { best2 = exact[lane]; face = f; }
+          if (closerFace(exact[lane], f, best2, face)) { best2 = exact[lane]; face = f; }
         }
       }
       counters_.triangles_tested = static_cast<uint32_t>(tested);
@@ -597,7 +608,7 @@ bool QueryStream::testSet(const CoherentState& state, const Vec3& p, double move
     counters_.triangles_tested += lanes;
     for (uint32_t lane = 0; lane < lanes; ++lane) {
       const TriangleIndex f = state.faces[first + lane];
-      if (exact[lane] < best2 || (exact[lane] == best2 && f < face)) {
+      if (closerFace(exact[lane], f, best2, face)) {
         best2 = exact[lane];
         face = f;
       }
@@ -1075,10 +1086,16 @@ void QueryStream::frontRefine(const Vec3& p, const float q[3], bool far, double&
   float dist[8];
   double lower = 0;
   front_tie_ = true;  // unless a face at the top proves otherwise
+  double kth_key = 0;  // k closest: the key of the last face taken
   while (!front_.empty()) {
     lower = std::min(front_.front().key - drift_, upper);
     if (stop_at_tolerance && upper < kInf && upper - lower <= tolerance) break;
-    if (!stop_at_tolerance && out->size() >= k) break;
+    // Keys carry the drift's rounding: distances a few ulps apart can merge or swap. Past k
+    // faces, whatever is within that rounding of the k-th key is taken too (the caller keeps
+    // the k closest by exact distance).
+    if (!stop_at_tolerance && out->size() >= k &&
+        front_.front().key > kth_key + 1e-12 * (std::abs(kth_key) + std::abs(drift_)))
+      break;
     DriftEntry e = frontPop();
     if (e.drift_at < drift_) {  // stale: recompute at p and put back
       const double bound = entryBound(e, p, q, far);
@@ -1105,6 +1122,7 @@ void QueryStream::frontRefine(const Vec3& p, const float q[3], bool far, double&
       }
       out->push_back(hitOn(static_cast<TriangleIndex>(e.ref), p));
       popped_.push_back(e);
+      kth_key = e.key;
       continue;
     }
     if (isLeafRef(e.ref)) {
@@ -1200,8 +1218,9 @@ void QueryStream::kClosestCoherent(const Vec3& p, size_t k, std::vector<Triangle
   VertexIndex upper_vertex = kInvalidIndex;
   frontRefine(p, sp.q, sp.far, upper, upper_face, upper_vertex, false, 0, k, &out);
   // Front keys carry the drift offset, which can merge distances one ulp apart: order the
-  // answer by the exact distances (ties by triangle index), as kClosest does.
+  // answer by the exact distances (ties by triangle index), as kClosest does, and keep k.
   std::sort(out.begin(), out.end(), hitBefore);
+  if (out.size() > k) out.resize(k);
 }
 
 }  // namespace meshsweeper

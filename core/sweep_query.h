@@ -119,8 +119,9 @@ class QueryStream {
   // any other point is answered, never searched: NaN distance and bounds, triangle
   // kInvalidIndex (closest*), no faces (kClosest*, within), and coherent state restarts.
   // Exact answers (closest(), closestCoherent(), and closestWithin*() with tolerance 0) give
-  // ties at equal distance to the lowest triangle index, so they never depend on the search
-  // order, the warm start or a cached set.
+  // ties at equal distance (as reported: two squared distances an ulp apart can have one root)
+  // to the lowest triangle index, like kClosest() and the brute force, so they never depend on
+  // the search order, the warm start or a cached set.
 
   // Exact closest point: depth-first, closest child first, pruning with the best distance.
   ClosestPoint closest(const Vec3& p);

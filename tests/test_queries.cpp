@@ -677,6 +677,44 @@ TEST_CASE("queries: a stream moved between meshes' points answers like a fresh o
   CHECK(differ == 0);
 }
 
+// Found by review: closest() compared squared distances, so of two faces whose squared
+// distances differ by an ulp but whose distances (the roots, as reported) are equal it took the
+// higher index, where kClosest(p, 1) and the brute force take the lower.
+TEST_CASE("queries: ties at one reported distance go to the lowest index", "[queries][ties]") {
+  Mesh twice;  // one triangle listed twice, the copy reversed: equal distances, computed apart
+  twice.positions = {Vec3(0, 0, 0), Vec3(1, 0.1, 0), Vec3(0.2, 0.9, 0.3)};
+  twice.triangles = {{0, 1, 2}, {2, 1, 0}};
+  Mesh reversed_first = twice;
+  std::swap(reversed_first.triangles[0], reversed_first.triangles[1]);
+  for (const Mesh* mesh : {&twice, &reversed_first}) {
+    const auto h = Hierarchy::build(*mesh);
+    QueryStream s(h), coherent(h);
+    CoherentState state;
+    Random random(5);
+    std::vector<TriangleHit> one;
+    Failures failures("ties");
+    size_t split = 0;  // points whose squared distances differ while the distances tie
+    for (int i = 0; i < 20000; ++i) {
+      const Vec3 p = random.inBox(Vec3(-2, -2, -2), Vec3(2, 2, 2));
+      const BruteHit b = bruteForceClosest(*mesh, p);
+      const Triangle& t0 = mesh->triangles[0];
+      const Triangle& t1 = mesh->triangles[1];
+      const double d0 = squaredDistanceToTriangle(p, mesh->positions[t0[0]], mesh->positions[t0[1]], mesh->positions[t0[2]]);
+      const double d1 = squaredDistanceToTriangle(p, mesh->positions[t1[0]], mesh->positions[t1[1]], mesh->positions[t1[2]]);
+      split += d0 != d1 && std::sqrt(d0) == std::sqrt(d1);
+      s.kClosest(p, 1, one);
+      const TriangleIndex answers[] = {s.closest(p).triangle, s.closestWithin(p, 0).triangle,
+                                       coherent.closestCoherent(p).triangle, coherent.closestCoherent(p, state).triangle,
+                                       one.at(0).triangle};
+      for (TriangleIndex t : answers)
+        failures.check(t == b.triangle, [&] {
+          return "point " + text(p) + ": triangle " + std::to_string(t) + ", brute force " + std::to_string(b.triangle);
+        });
+    }
+    CHECK(split > 50);  // the case arises
+  }
+}
+
 TEST_CASE("queries: points that are not finite or beyond 1e153 are answered without a search", "[queries][errors]") {
   // Every query kind gives NaN / no faces for them (squared distances would overflow), restarts
   // coherent state, and answers the next point in range as a fresh stream does.
