@@ -162,7 +162,7 @@ std::shared_ptr<const BodyShape> BodyShape::build(std::shared_ptr<const Hierarch
   }
 
   // Rest pseudonormals. A degenerate face (one the exact distance answers by its segments: zero
-  // area, or a cap within about 0.001 degree of 180) has no reliable normal, and where it is
+  // area, or a cap within about 2e-6 degree of 180) has no reliable normal, and where it is
   // closest the feature is decided by rounding: its pseudonormals would not decide the sign, so
   // a mesh with one is treated as open (unsigned answers, never a wrong sign).
   const auto& pos = mesh.positions;
@@ -173,7 +173,7 @@ std::shared_ptr<const BodyShape> BodyShape::build(std::shared_ptr<const Hierarch
     if (reason.empty() && isDegenerateTriangle(pos[t[0]], pos[t[1]], pos[t[2]]))
       reason = "face " + std::to_string(f) +
                (shape->face_normals_[f].squaredNorm() == 0 ? " has zero area"
-                                                            : " is degenerate (an angle within 0.001 degree of 180)");
+                                                            : " is degenerate (an angle within 2e-6 degree of 180)");
   }
   // Orientation: a closed surface whose faces point inward encloses a negative volume (summed
   // over the faces, about the box's centre). It is the same solid: its normals are flipped, so

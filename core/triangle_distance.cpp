@@ -35,12 +35,13 @@
 // for bit (the tests compare them on random and degenerate lanes).
 //
 // What is not computed exactly (\bug):
-//  - caps below kDegenerate (a largest angle within about 0.001 degree of 180) are answered by
-//    their segments, off by up to the cap's height from the plane; thin triangles above it go
-//    through the projection (step 3), whose inside test errs by about eps * |ap| / sin of the
-//    largest angle (at the threshold, 1e-11 of |ap|), where the segments and the projection
-//    agree to that; elsewhere the error is rounding of the returned point (a few
-//    eps * |coordinates| * distance);
+//  - caps below kDegenerate (a largest angle within about 2e-6 degree of 180) are answered by
+//    their segments, off by up to half the cap's height (1.6e-8 of its length at the
+//    threshold) for a point on it; thin triangles above it go through the projection (step 3),
+//    whose normal and inside test err by about eps * |ap| / sin of the largest angle (7e-9 of
+//    |ap| at the threshold, 2e-11 at sin^2 1e-10); elsewhere the error is the rounding of the
+//    returned point, a few eps * |coordinates| (absolute: a mesh far from the origin loses
+//    digits on small distances);
 //  - a needle whose short edge lies almost along its long ones is a sliver (largest angle near
 //    180 degrees): its point is rebuilt from coordinates that lose eps over the short edge, so
 //    a point near its tip can be off by about 1e-13 of the coordinates when the short edge is
@@ -59,9 +60,11 @@
 namespace meshsweeper {
 namespace {
 
-// sin^2 of the largest angle below which a triangle is answered by its segments; 1e-10 balances
-// the two errors described above (tuned on caps against a 113-bit reference).
-constexpr double kDegenerate = 1e-10;
+// sin^2 of the largest angle below which a triangle is answered by its segments. The two worst
+// errors described above meet there: the projection's eps / sin (of |ap|) and the segments'
+// half height, sin / 2 (of the length), equal at sin^2 = 2 eps. (It was 1e-10, where the
+// segments answered a point lying on a cap 2.4e-6 away, half its height; found by review.)
+constexpr double kDegenerate = 1e-15;
 // sin^2 of the smallest angle below which a triangle is thin (an angle below about 1.8
 // degrees): a sliver's Gram numerators lose about eps / sin^2 of |ap| (measured: a point on a
 // sliver of sin^2 1.4e-10 answered 7.6e-7 away), a needle's coordinates eps * |ap| / (short

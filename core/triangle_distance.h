@@ -23,7 +23,7 @@ TriangleClosest closestPointOnTriangle(const Vec3& p, const Vec3& a, const Vec3&
 double squaredDistanceToTriangle(const Vec3& p, const Vec3& a, const Vec3& b, const Vec3& c);
 
 // True when the functions above answer the triangle by its three segments: sin^2 of its
-// largest angle at most 1e-10 (a segment, a point, or a cap within about 0.001 degree of 180),
+// largest angle at most 1e-15 (a segment, a point, or a cap within about 2e-6 degree of 180),
 // or a coordinate that is not finite. Such a triangle has no reliable normal.
 bool isDegenerateTriangle(const Vec3& a, const Vec3& b, const Vec3& c);
 
