@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <stdexcept>
 
 namespace meshsweeper {
@@ -223,6 +224,38 @@ void BodyShape::prefetchRestPseudonormal(TriangleIndex triangle, Feature feature
 Vec3 BodyShape::pseudonormal(TriangleIndex triangle, Feature feature, const Vec3* positions,
                               double orientation) const {
   return orientation * pseudonormalAsGiven(triangle, feature, positions);
+}
+
+bool PlacementOrientation::holdsWithin(double delta) const {
+  if (!closed) return true;
+  if (!(delta >= 0)) return false;
+  // |d volume6| <= 6 delta area, area <= sum (|ab| + 2 delta)(|ac| + 2 delta) / 2.
+  const double flux = 3 * delta * (edge_products + 2 * delta * edge_sums + 4 * delta * delta * faces);
+  return std::abs(volume6) - rounding > flux * (1 + 1e-12);
+}
+
+PlacementOrientation BodyShape::placementOrientation(const Vec3* positions) const {
+  PlacementOrientation out;
+  out.orientation = orientation_;
+  const Mesh& m = mesh();
+  if (!closed_ || m.triangles.empty()) return out;
+  out.closed = true;
+  const Vec3 o = positions[m.triangles[0][0]];
+  double magnitude = 0;
+  for (const Triangle& t : m.triangles) {
+    const Vec3 a = positions[t[0]] - o, b = positions[t[1]] - o, c = positions[t[2]] - o;
+    out.volume6 += a.dot(b.cross(c));
+    magnitude += a.norm() * b.norm() * c.norm();
+    const double ab = (b - a).norm(), ac = (c - a).norm();
+    out.edge_products += ab * ac;
+    out.edge_sums += ab + ac;
+  }
+  out.faces = static_cast<double>(m.triangles.size());
+  // Each term errs by a few eps of its magnitude, the sum by eps per term at most.
+  out.rounding = (out.faces + 16) * std::numeric_limits<double>::epsilon() * magnitude;
+  if (out.volume6 > 0) out.orientation = 1.0;
+  else if (out.volume6 < 0) out.orientation = -1.0;
+  return out;
 }
 
 double BodyShape::orientationAt(const Vec3* positions) const {

@@ -30,6 +30,24 @@
 
 namespace meshsweeper {
 
+// The orientation of one placement of a closed surface, and what keeps it: the enclosed volume
+// moves at the flux of the vertices' motion through the surface, so while every vertex stays
+// within delta of the placement (on straight paths, as linear interpolation and any new
+// positions measured from it give) the volume changes by at most delta times the surface's
+// area, bounded from the placement's edges grown by 2 delta. A volume farther from zero than
+// that keeps its sign.
+struct PlacementOrientation {
+  double orientation = 1;    // BodyShape::orientationAt() of the placement
+  double volume6 = 0;        // 6 x the enclosed volume, faces as given
+  double rounding = 0;       // bound on volume6's rounding
+  double edge_products = 0;  // sum over faces of |ab| |ac|
+  double edge_sums = 0;      // sum over faces of |ab| + |ac|
+  double faces = 0;
+  bool closed = false;  // false: orientation is the shape's rest one, whatever the placement
+  // Whether every placement with each vertex within delta of this one has its orientation.
+  bool holdsWithin(double delta) const;
+};
+
 class BodyShape {
  public:
   // Builds the tables of hierarchy->mesh(). Throws std::invalid_argument if hierarchy is null.
@@ -79,6 +97,8 @@ class BodyShape {
   // positions, or an inward mesh); the rest orientation when the volume is zero or not finite
   // (no inside: signs mean nothing there), and for a shape that is not closed(). O(faces).
   double orientationAt(const Vec3* positions) const;
+  // orientationAt(positions) with what keeps it under motion (PlacementOrientation). O(faces).
+  PlacementOrientation placementOrientation(const Vec3* positions) const;
   // The rest positions' orientation (inward() ? -1 : +1).
   double restOrientation() const { return orientation_; }
 

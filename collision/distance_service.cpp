@@ -102,8 +102,13 @@ struct Body {
   Box3 box;
   bool box_dirty = true;
   // The placement's orientation (BodyShape::orientationAt), refreshed with the box: a
-  // key-framed or deforming closed body can be placed as a mirror image of its mesh.
+  // key-framed or deforming closed body can be placed as a mirror image of its mesh. It is
+  // recomputed (one pass over the faces) only when the references cannot vouch for it:
+  // deforming, [0] at the anchor, whose vertices stay within the displacement bound of it;
+  // key-framed, [i] at frame i, its vertices moving at most orientation_reach[i] to frame i + 1.
   double orientation = 1;
+  std::vector<PlacementOrientation> orientation_refs;
+  std::vector<double> orientation_reach;
 
   // What the body's streams read: null (rest geometry, body frame) for rigid bodies.
   const TreeGeometry* geometry() const {
@@ -199,6 +204,7 @@ struct DistanceService::Impl {
     if (!check.accepted) {
       b.deforming->anchor(positions);
       b.deforming->inflate(b.displacement_bound);
+      anchorOrientation(b, positions);
       update.reanchored = true;
       update.worst_vertex = check.worst_vertex;
       update.excess = check.excess;
@@ -251,6 +257,40 @@ struct DistanceService::Impl {
     return {slot, bodies[slot].generation};
   }
 
+  // A closed key-framed or deforming body's orientation at `pos`, its current positions.
+  static double placementOrientation(const Body& b, const std::vector<Vec3>& pos) {
+    size_t i = 0;
+    if (b.keyframed && b.keyframed->frameCount() > 1)
+      i = std::min(static_cast<size_t>(b.keyframed->time()), b.keyframed->frameCount() - 2);
+    if (i < b.orientation_refs.size() && b.orientation_refs[i].holdsWithin(b.orientation_reach[i]))
+      return b.orientation_refs[i].orientation;
+    return b.shape->orientationAt(pos.data());
+  }
+
+  // A deforming body anchored at `anchor` with its displacement bound.
+  static void anchorOrientation(Body& b, const std::vector<Vec3>& anchor) {
+    b.orientation_refs.clear();
+    b.orientation_reach.clear();
+    if (!b.shape->closed()) return;
+    b.orientation_refs.push_back(b.shape->placementOrientation(anchor.data()));
+    b.orientation_reach.push_back(b.displacement_bound);
+  }
+
+  // A key-framed body's references, one per pair of frames (or the single frame).
+  static void keyframeOrientations(Body& b) {
+    b.orientation_refs.clear();
+    b.orientation_reach.clear();
+    if (!b.shape->closed()) return;
+    const std::vector<std::vector<Vec3>>& frames = b.keyframed->frames();
+    for (size_t i = 0; i == 0 || i + 1 < frames.size(); ++i) {
+      b.orientation_refs.push_back(b.shape->placementOrientation(frames[i].data()));
+      double reach = 0;
+      if (i + 1 < frames.size())
+        for (size_t v = 0; v < frames[i].size(); ++v) reach = std::max(reach, (frames[i + 1][v] - frames[i][v]).norm());
+      b.orientation_reach.push_back(reach);
+    }
+  }
+
   void refreshBox(Body& b) {
     Box3 box;
     if (b.kind == BodyKind::kRigid) {
@@ -277,7 +317,7 @@ struct DistanceService::Impl {
         box.lower = box.lower.cwiseMin(x);
         box.upper = box.upper.cwiseMax(x);
       }
-      if (b.shape->closed()) b.orientation = b.shape->orientationAt(pos.data());
+      if (b.shape->closed()) b.orientation = placementOrientation(b, pos);
     }
     b.box = box;
   }
@@ -641,6 +681,7 @@ BodyHandle DistanceService::addKeyframed(std::shared_ptr<const Hierarchy> hierar
   b.shape = shapeFor(hierarchy);
   b.keyframed = std::make_unique<KeyframeBody>(std::move(hierarchy), std::move(frames));
   b.keyframed->setTime(time);
+  Impl::keyframeOrientations(b);
   return impl_->add(std::move(b));
 }
 
@@ -655,6 +696,7 @@ BodyHandle DistanceService::addDeforming(std::shared_ptr<const Hierarchy> hierar
   if (!positions.empty()) b.deforming->anchor(positions);
   b.deforming->inflate(displacement_bound);
   b.displacement_bound = displacement_bound;
+  Impl::anchorOrientation(b, b.deforming->positions());
   return impl_->add(std::move(b));
 }
 
@@ -775,6 +817,7 @@ void DistanceService::setDisplacementBound(BodyHandle body, double displacement_
     b.deforming->inflate(displacement_bound);
   });
   b.displacement_bound = displacement_bound;
+  Impl::anchorOrientation(b, current);
 }
 
 bool DistanceService::inlineFaces(BodyHandle body) const {

@@ -26,6 +26,8 @@ class KeyframeBody {
   void setTime(double t);
   double time() const { return time_; }
   size_t frameCount() const { return frames_.size(); }
+  // [frame][vertex] the key frames as given.
+  const std::vector<std::vector<Vec3>>& frames() const { return frames_; }
 
   // What queries read (QueryStream::setGeometry); valid until the body is destroyed.
   const TreeGeometry& geometry() const { return geometry_; }

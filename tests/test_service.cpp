@@ -603,11 +603,27 @@ TEST_CASE("a closed body placed as a mirror image keeps inside inside", "[servic
     checkSigns(s, "deforming, mirrored by setPositions");
   }
   {
+    DistanceService s;  // a bound larger than the body: mirrored without re-anchoring
+    const BodyHandle b = s.addDeforming(s.hierarchyFor(torus), 5.0);
+    s.step(toMatrix(points), kInf, QueryMode::kClosest);
+    CHECK_FALSE(s.setPositions(b, mirrored).reanchored);
+    checkSigns(s, "deforming, mirrored within its bound");
+  }
+  {
     DistanceService s;
     const BodyHandle b = s.addKeyframed(s.hierarchyFor(torus), {torus.positions, mirrored}, 0.0);
     s.setTime(b, 1.0);
     checkSigns(s, "key-framed, a mirrored frame");
   }
+  // What spares the per-step pass over the faces: a placement keeps its orientation while its
+  // vertices stay within a fraction of its thickness (the torus's tube has radius 0.35).
+  const PlacementOrientation rest = service.shapeFor(hierarchy)->placementOrientation(torus.positions.data());
+  CHECK(rest.orientation == 1.0);
+  CHECK(rest.holdsWithin(0.01));
+  CHECK_FALSE(rest.holdsWithin(0.5));
+  const PlacementOrientation mirror = service.shapeFor(hierarchy)->placementOrientation(mirrored.data());
+  CHECK(mirror.orientation == -1.0);
+  CHECK(mirror.holdsWithin(0.01));
 }
 
 // Found by review: a point lying exactly on a face was answered about 1e-17 away (the closest
