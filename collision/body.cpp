@@ -226,15 +226,22 @@ Vec3 BodyShape::pseudonormal(TriangleIndex triangle, Feature feature, const Vec3
   return orientation * pseudonormalAsGiven(triangle, feature, positions);
 }
 
-bool PlacementOrientation::holdsWithin(double delta) const {
-  if (!closed) return true;
-  if (!(delta >= 0)) return false;
-  // |d volume6| <= 6 delta area, area <= sum (|ab| + 2 delta)(|ac| + 2 delta) / 2.
-  const double flux = 3 * delta * (edge_products + 2 * delta * edge_sums + 4 * delta * delta * faces);
-  return std::abs(volume6) - rounding > flux * (1 + 1e-12);
+double PlacementOrientation::grownArea2(double delta) const {
+  // A face's area grows to at most (|ab x ac| + 2 delta (|ab| + |ac|) + 4 delta^2) / 2: each
+  // edge moves by 2 delta at most.
+  return edge_products + 2 * delta * edge_sums + 4 * delta * delta * faces;
 }
 
-PlacementOrientation BodyShape::placementOrientation(const Vec3* positions) const {
+bool PlacementOrientation::holdsWithin(double delta) const { return holdsWithin(delta, grownArea2(delta)); }
+
+bool PlacementOrientation::holdsWithin(double delta, double area2) const {
+  if (!closed) return true;
+  if (!(delta >= 0)) return false;
+  // |d volume6| <= 6 delta area.
+  return std::abs(volume6) - rounding > 3 * delta * area2 * (1 + 1e-12);
+}
+
+PlacementOrientation BodyShape::placementOrientation(const Vec3* positions, bool with_area) const {
   PlacementOrientation out;
   out.orientation = orientation_;
   const Mesh& m = mesh();
@@ -245,14 +252,16 @@ PlacementOrientation BodyShape::placementOrientation(const Vec3* positions) cons
   for (const Triangle& t : m.triangles) {
     const Vec3 a = positions[t[0]] - o, b = positions[t[1]] - o, c = positions[t[2]] - o;
     out.volume6 += a.dot(b.cross(c));
-    magnitude += a.norm() * b.norm() * c.norm();
-    const double ab = (b - a).norm(), ac = (c - a).norm();
-    out.edge_products += ab * ac;
-    out.edge_sums += ab + ac;
+    magnitude += a.cwiseAbs().maxCoeff() * b.cwiseAbs().maxCoeff() * c.cwiseAbs().maxCoeff();
+    if (!with_area) continue;
+    const Vec3 ab = b - a, ac = c - a;
+    out.edge_products += ab.cross(ac).norm();
+    out.edge_sums += ab.norm() + ac.norm();
   }
   out.faces = static_cast<double>(m.triangles.size());
-  // Each term errs by a few eps of its magnitude, the sum by eps per term at most.
-  out.rounding = (out.faces + 16) * std::numeric_limits<double>::epsilon() * magnitude;
+  // Each term (at most 6 times the product of its corners' largest coordinates) errs by a few
+  // eps of that, the sum by eps per term at most.
+  out.rounding = 6 * (out.faces + 16) * std::numeric_limits<double>::epsilon() * magnitude;
   if (out.volume6 > 0) out.orientation = 1.0;
   else if (out.volume6 < 0) out.orientation = -1.0;
   return out;

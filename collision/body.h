@@ -34,18 +34,23 @@ namespace meshsweeper {
 // moves at the flux of the vertices' motion through the surface, so while every vertex stays
 // within delta of the placement (on straight paths, as linear interpolation and any new
 // positions measured from it give) the volume changes by at most delta times the surface's
-// area, bounded from the placement's edges grown by 2 delta. A volume farther from zero than
-// that keeps its sign.
+// area, bounded from the placement's faces and edges grown by 2 delta. A volume farther from
+// zero than that keeps its sign.
 struct PlacementOrientation {
   double orientation = 1;    // BodyShape::orientationAt() of the placement
   double volume6 = 0;        // 6 x the enclosed volume, faces as given
   double rounding = 0;       // bound on volume6's rounding
-  double edge_products = 0;  // sum over faces of |ab| |ac|
+  double edge_products = 0;  // sum over faces of |ab x ac| (twice the area)
   double edge_sums = 0;      // sum over faces of |ab| + |ac|
   double faces = 0;
   bool closed = false;  // false: orientation is the shape's rest one, whatever the placement
   // Whether every placement with each vertex within delta of this one has its orientation.
   bool holdsWithin(double delta) const;
+  // The same, given a bound on twice the area of every placement on the way (the edge fields
+  // need not be filled).
+  bool holdsWithin(double delta, double area2) const;
+  // Twice the largest area of a placement with each vertex within delta of this one.
+  double grownArea2(double delta) const;
 };
 
 class BodyShape {
@@ -97,8 +102,9 @@ class BodyShape {
   // positions, or an inward mesh); the rest orientation when the volume is zero or not finite
   // (no inside: signs mean nothing there), and for a shape that is not closed(). O(faces).
   double orientationAt(const Vec3* positions) const;
-  // orientationAt(positions) with what keeps it under motion (PlacementOrientation). O(faces).
-  PlacementOrientation placementOrientation(const Vec3* positions) const;
+  // orientationAt(positions) with what keeps it under motion (PlacementOrientation); without
+  // `with_area`, the volume only (the edge fields stay 0). O(faces).
+  PlacementOrientation placementOrientation(const Vec3* positions, bool with_area = true) const;
   // The rest positions' orientation (inward() ? -1 : +1).
   double restOrientation() const { return orientation_; }
 

@@ -106,9 +106,14 @@ struct Body {
   // recomputed (one pass over the faces) only when the references cannot vouch for it:
   // deforming, [0] at the anchor, whose vertices stay within the displacement bound of it;
   // key-framed, [i] at frame i, its vertices moving at most orientation_reach[i] to frame i + 1.
+  // A deforming body whose anchor cannot vouch for its whole bound also keeps the last placement
+  // computed, valid while the vertices' drift since then (TreeGeometry::drift) allows.
   double orientation = 1;
   std::vector<PlacementOrientation> orientation_refs;
   std::vector<double> orientation_reach;
+  PlacementOrientation orientation_last;
+  double orientation_last_drift = -1;  // the drift at orientation_last (-1: none)
+  uint64_t orientation_last_lineage = 0;  // and its lineage
 
   // What the body's streams read: null (rest geometry, body frame) for rigid bodies.
   const TreeGeometry* geometry() const {
@@ -258,19 +263,32 @@ struct DistanceService::Impl {
   }
 
   // A closed key-framed or deforming body's orientation at `pos`, its current positions.
-  static double placementOrientation(const Body& b, const std::vector<Vec3>& pos) {
+  static double placementOrientation(Body& b, const std::vector<Vec3>& pos) {
     size_t i = 0;
     if (b.keyframed && b.keyframed->frameCount() > 1)
       i = std::min(static_cast<size_t>(b.keyframed->time()), b.keyframed->frameCount() - 2);
     if (i < b.orientation_refs.size() && b.orientation_refs[i].holdsWithin(b.orientation_reach[i]))
       return b.orientation_refs[i].orientation;
-    return b.shape->orientationAt(pos.data());
+    if (!b.deforming || b.orientation_refs.empty()) return b.shape->orientationAt(pos.data());
+    // Within a lineage, every vertex moved at most the drift's growth since (hierarchy.h), and
+    // every placement on the way lies within the bound of the anchor, whose grown area bounds
+    // theirs: the last placement's volume alone is needed (a pass without square roots).
+    const TreeGeometry& g = b.deforming->geometry();
+    const double area2 = b.orientation_refs[0].grownArea2(b.displacement_bound);
+    if (!(b.orientation_last_drift >= 0 && b.orientation_last_lineage == g.lineage &&
+          b.orientation_last.holdsWithin(g.drift - b.orientation_last_drift, area2))) {
+      b.orientation_last = b.shape->placementOrientation(pos.data(), false);
+      b.orientation_last_drift = g.drift;
+      b.orientation_last_lineage = g.lineage;
+    }
+    return b.orientation_last.orientation;
   }
 
   // A deforming body anchored at `anchor` with its displacement bound.
   static void anchorOrientation(Body& b, const std::vector<Vec3>& anchor) {
     b.orientation_refs.clear();
     b.orientation_reach.clear();
+    b.orientation_last_drift = -1;
     if (!b.shape->closed()) return;
     b.orientation_refs.push_back(b.shape->placementOrientation(anchor.data()));
     b.orientation_reach.push_back(b.displacement_bound);
