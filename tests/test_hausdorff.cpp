@@ -608,15 +608,46 @@ TEST_CASE("printed bounds round outward") {
   CHECK(outwardBound(1.0, 7, true) == "1");
   CHECK(outwardFixed(0.25, 5, false) == "0.25000");
   CHECK(outwardFixed(std::numeric_limits<double>::max(), 5, false).find("inf") == std::string::npos);
+  // Short decimals a long double read-back takes for the double they round to, though they lie
+  // on one side of it (found by review: "0.110499" was printed as a lower bound of the double
+  // 0.110499, 0.11049899999999999999911, and "0.106003" as an upper bound of the double
+  // 0.106003, 0.10600300000000000000266).
+  using meshsweeper::cli::compareDecimal;
+  CHECK(compareDecimal("0.110499", 0.110499) == 1);
+  CHECK(compareDecimal("0.106003", 0.106003) == -1);
+  CHECK(compareDecimal("0.1", 0.1) == -1);
+  CHECK(compareDecimal("0.375", 0.375) == 0);
+  CHECK(compareDecimal("-3.75e-1", -0.375) == 0);
+  CHECK(compareDecimal("-0.1", -0.1) == 1);
+  CHECK(compareDecimal("0", 0.0) == 0);
+  CHECK(compareDecimal("0", -1e-300) == 1);
+  CHECK(compareDecimal("4.9406564584124654e-324", std::numeric_limits<double>::denorm_min()) == -1);
+  CHECK(outwardBound(0.110499, 7, false) == "0.1104989");
+  CHECK(outwardBound(0.110499, 7, true) == "0.110499");
+  CHECK(outwardBound(0.106003, 7, true) == "0.1060031");
+  CHECK(outwardBound(0.106003, 7, false) == "0.106003");
   std::mt19937_64 rng(3);
   for (int i = 0; i < 20000; ++i) {
     const double x = std::ldexp(static_cast<double>(rng() >> 11), static_cast<int>(rng() % 200) - 150) *
                      (rng() & 1 ? 1 : -1);
     for (bool up : {false, true}) {
-      const long double b = std::strtold(outwardBound(x, 7, up).c_str(), nullptr);
-      const long double f = std::strtold(outwardFixed(x, 5, up).c_str(), nullptr);
-      CHECK((up ? b >= x : b <= x));
-      CHECK((up ? f >= x : f <= x));
+      const std::string b = outwardBound(x, 7, up), f = outwardFixed(x, 5, up);
+      CHECK((up ? compareDecimal(b, x) >= 0 : compareDecimal(b, x) <= 0));
+      CHECK((up ? compareDecimal(f, x) >= 0 : compareDecimal(f, x) <= 0));
+      // Where long double decides (the text more than an ulp of it away), it agrees.
+      const long double lb = std::strtold(b.c_str(), nullptr);
+      if (std::fabs(lb - x) > 1e-18L * std::fabs(lb)) CHECK(compareDecimal(b, x) == (lb < x ? -1 : 1));
+    }
+  }
+  // Short decimals next to the doubles they read back as: the side is decided exactly.
+  for (int i = 0; i < 20000; ++i) {
+    char text[32];
+    std::snprintf(text, sizeof text, "0.%06llu", static_cast<unsigned long long>(rng() % 1000000));
+    const double x = std::strtod(text, nullptr);
+    for (bool up : {false, true}) {
+      const std::string b = outwardBound(x, 7, up);
+      CHECK((up ? compareDecimal(b, x) >= 0 : compareDecimal(b, x) <= 0));
+      if (compareDecimal(text, x) == 0 || (compareDecimal(text, x) > 0) == up) CHECK(std::strtod(b.c_str(), nullptr) == x);
     }
   }
 }

@@ -4,16 +4,80 @@
 // no longer contain the quantity. Header-only, so that the demo scenes (scenes/, a library
 // without the tool) print their bounds the way `meshsweep hausdorff` does.
 //
-// The text is read back in long double (64-bit mantissa) and compared with the value there: a
-// decimal within half an ulp of a double reads back as that double, which would hide that "0.1"
-// is below 0.1000000000000000055 (the double 0.1). Subnormals and the largest doubles work in
-// long double too.
+// The text is compared with the value exactly, digit by digit against the double's exact
+// decimal expansion: a read-back in double takes "0.1" for the double 0.1 (0.1000000000000000055),
+// and one in long double still takes about one short decimal in 2,048 for a double it is not
+// ("0.110499" reads back as the double 0.110499, which is 0.11049899999999999999999911; found by
+// review). Subnormals and the largest doubles included.
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <string>
 
 namespace meshsweeper::cli {
+
+namespace detail {
+
+// A decimal number: sign, significant digits (no leading or trailing zeros; empty for zero)
+// and exponent, value = d1.d2d3... x 10^exponent.
+struct Decimal {
+  bool negative = false;
+  std::string digits;
+  long exponent = 0;
+};
+
+// Reads "[-]ddd[.ddd][e[+-]dd]" (what printf's %e, %f and %g write).
+inline Decimal parseDecimal(const char* text) {
+  Decimal d;
+  const char* c = text;
+  if (*c == '-' || *c == '+') d.negative = *c++ == '-';
+  long point = -1;  // digits before the point
+  std::string all;
+  for (; (*c >= '0' && *c <= '9') || *c == '.'; ++c) {
+    if (*c == '.') point = static_cast<long>(all.size());
+    else all.push_back(*c);
+  }
+  if (point < 0) point = static_cast<long>(all.size());
+  long exponent = (*c == 'e' || *c == 'E') ? std::strtol(c + 1, nullptr, 10) : 0;
+  const std::size_t first = all.find_first_not_of('0');
+  if (first == std::string::npos) return Decimal{d.negative, "", 0};
+  const std::size_t last = all.find_last_not_of('0');
+  d.digits = all.substr(first, last - first + 1);
+  d.exponent = exponent + point - 1 - static_cast<long>(first);
+  return d;
+}
+
+// -1, 0 or 1 as |a| is below, equal to or above |b|.
+inline int compareMagnitude(const Decimal& a, const Decimal& b) {
+  if (a.digits.empty() || b.digits.empty()) return a.digits.empty() ? (b.digits.empty() ? 0 : -1) : 1;
+  if (a.exponent != b.exponent) return a.exponent < b.exponent ? -1 : 1;
+  const int c = a.digits.compare(b.digits);  // no trailing zeros: a longer prefix match is larger
+  return c < 0 ? -1 : (c > 0 ? 1 : 0);
+}
+
+// The exact decimal expansion of a finite double (at most 767 significant digits), in %e form
+// without trailing zeros.
+inline std::string exactText(double x) {
+  char text[900];
+  std::snprintf(text, sizeof text, "%.800e", x);
+  std::string s = text;
+  const std::size_t e = s.find('e');
+  std::size_t end = s.find_last_not_of('0', e - 1);
+  if (s[end] == '.') --end;
+  return s.substr(0, end + 1) + s.substr(e);
+}
+
+}  // namespace detail
+
+// -1, 0 or 1 as the decimal `text` is below, equal to or above the finite double x, exactly.
+inline int compareDecimal(const std::string& text, double x) {
+  const detail::Decimal a = detail::parseDecimal(text.c_str());
+  const detail::Decimal b = detail::parseDecimal(detail::exactText(x).c_str());
+  const bool a_negative = a.negative && !a.digits.empty(), b_negative = b.negative && !b.digits.empty();
+  if (a_negative != b_negative) return a_negative ? -1 : 1;
+  const int m = detail::compareMagnitude(a, b);
+  return a_negative ? -m : m;
+}
 
 // x with `digits` significant digits (1 to 17), rounded down (up = false) or up.
 inline std::string outwardBound(double x, int digits, bool up) {
@@ -24,14 +88,14 @@ inline std::string outwardBound(double x, int digits, bool up) {
   for (int attempt = 0; attempt < 8; ++attempt) {
     std::snprintf(text, sizeof text, "%.*Lg", digits, y);
     const long double shown = std::strtold(text, nullptr);
-    if (up ? shown >= target : shown <= target) return text;
+    const int side = compareDecimal(text, x);
+    if (up ? side >= 0 : side <= 0) return text;
     // One unit of the last digit shown beyond the rounded value, in the needed direction.
     const long double unit = shown == 0 ? std::fabs(target)
                                         : std::pow(10.0L, std::floor(std::log10(std::fabs(shown))) - (digits - 1));
     y = up ? shown + unit : shown - unit;
   }
-  std::snprintf(text, sizeof text, "%.21Lg", target);  // not reached in practice: x itself
-  return text;
+  return detail::exactText(x);  // not reached in practice: x itself, exactly
 }
 
 // x with `decimals` digits after the point (0 to 17), rounded down (up = false) or up: a bound
@@ -68,11 +132,11 @@ inline std::string outwardFixed(double x, int decimals, bool up) {
     std::snprintf(text, sizeof text, "%.*Lf", decimals, y);
     // The scaling rounds: the text is checked, and moved one unit out if it fell inside.
     const long double shown = std::strtold(text, nullptr);
-    if (up ? shown >= target : shown <= target) return text;
+    const int side = compareDecimal(text, x);
+    if (up ? side >= 0 : side <= 0) return text;
     y = up ? shown + 1 / scale : shown - 1 / scale;
   }
-  std::snprintf(text, sizeof text, "%.*Lf", decimals, target);
-  return text;
+  return detail::exactText(x);  // not reached in practice: x itself, exactly
 }
 
 }  // namespace meshsweeper::cli

@@ -113,12 +113,19 @@ uint64_t parseInteger(const std::string& text, const std::string& what, uint64_t
 }
 
 double parseFiniteDouble(const std::string& text, const std::string& what) {
+  // Decimal notation only: strtod also reads hexadecimal ("0x10" is 16), "inf" and "nan".
+  if (text.empty() || text.find_first_not_of("0123456789+-.eE") != std::string::npos)
+    throw UsageError(what + " must be a finite decimal number (got '" + text + "')");
   const char* begin = text.c_str();
   char* end = nullptr;
   errno = 0;
   const double x = std::strtod(begin, &end);
-  if (text.empty() || end != begin + text.size() || errno == ERANGE || !std::isfinite(x))
-    throw UsageError(what + " must be a finite number (got '" + text + "')");
+  if (end != begin + text.size())
+    throw UsageError(what + " must be a finite decimal number (got '" + text + "')");
+  // Past the largest double; a value below the smallest rounds (to a subnormal or 0), which
+  // the option's own range check judges.
+  if (!std::isfinite(x) || (errno == ERANGE && std::fabs(x) > 1))
+    throw UsageError(what + " is beyond the largest double, 1.8e308 (got '" + text + "')");
   return x;
 }
 

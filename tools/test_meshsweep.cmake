@@ -165,6 +165,14 @@ check(nan_tolerance RC 2 ARGS closest quad.off points.txt --tolerance nan ERR "f
 check(inf_within RC 2 ARGS closest quad.off points.txt --within inf ERR "finite")
 check(negative_within RC 2 ARGS closest quad.off points.txt --within -0.5 ERR "negative")
 check(garbage_tolerance RC 2 ARGS closest quad.off points.txt --tolerance 1e-3x ERR "finite")
+# Decimal notation only (strtod read "0x10" as 16); past the largest double is not "not finite";
+# below the smallest, the value rounds and the option's own range decides (from a review).
+check(hex_tolerance RC 2 ARGS closest quad.off points.txt --tolerance 0x10
+  ERR "--tolerance must be a finite decimal number (got '0x10')")
+check(huge_tolerance RC 2 ARGS closest quad.off points.txt --tolerance 1e999
+  ERR "--tolerance is beyond the largest double, 1.8e308 (got '1e999')")
+check(tiny_relative RC 2 ARGS hausdorff quad.off quad.off --relative 1e-400 ERR "--relative must be > 0")
+check(subnormal_relative RC 0 ARGS hausdorff quad.off quad.off --relative 1e-320 OUT "tolerance 4e-12")
 check(zero_k RC 2 ARGS closest quad.off points.txt --k 0 ERR "--k must be an integer")
 check(negative_k RC 2 ARGS closest quad.off points.txt --k -3 ERR "--k must be an integer")
 check(fraction_k RC 2 ARGS closest quad.off points.txt --k 1.5 ERR "--k must be an integer")
