@@ -16,7 +16,8 @@
 //       (hash map keyed by the edge's two sample ids); query the new ones (Morton order,
 //       parallel chunks; each warm-started from the closest face of its edge's nearer end)
 //     LB <- max(LB, new sample distances)
-//     each popped cell -> 4 children (corners and edge midpoints); bound each child;
+//     each popped cell -> 4 children (corners and edge midpoints), or 2 for a degenerate one
+//       (the halves of the segment it is, kThinFraction); bound each child;
 //       push it if its UB > threshold, else it is final ("dropped")
 //   until the highest UB <= threshold
 //   upper = max(LB, highest UB left, highest UB dropped) <= LB + tol
@@ -138,6 +139,12 @@ constexpr size_t kBatchDivisor = 16;
 constexpr size_t kMaxBatch = 8192;
 // A cell 2^-kMaxDepth the size of its triangle is not split further.
 constexpr uint8_t kMaxDepth = 48;
+// A cell whose third corner lies within this fraction of the tolerance of its longest edge
+// (degenerate: collinear or repeated corners, or nearly so) is split as that segment, in two,
+// its thickness carried as a margin. Split in four like the others, its children would overlap
+// (three of them cover half the segment each: a triangle with a repeated corner ran into
+// gigabytes at a relative tolerance of 1e-10; found by review).
+constexpr double kThinFraction = 1e-3;
 
 // ---- Samples and cells -----------------------------------------------------------------
 
@@ -154,7 +161,9 @@ struct Cell {
   TriangleIndex source;  // [triangle of A] the original triangle it is a piece of
   double upper;          // certified bound of d(x, B) over the cell
   uint8_t depth;         // 0 for an original triangle
-  bool split;            // replaced by its four children
+  bool split;            // replaced by its children
+  float thickness;       // every point of the piece of A is this close to the cell (a segment
+                         // standing for a thin piece, splitThin); 0 for a triangle
 };
 
 // Edge (two sample ids) -> midpoint sample id; open addressing, linear probing.
@@ -683,7 +692,7 @@ class Direction {
         const TriangleIndex f = triangle_order_[i];
         const Triangle& t = a.triangles[f];
         Cell& cell = cells_[f];
-        cell = Cell{{t[0], t[1], t[2]}, static_cast<TriangleIndex>(f), 0, 0, false};
+        cell = Cell{{t[0], t[1], t[2]}, static_cast<TriangleIndex>(f), 0, 0, false, 0.0f};
         const CellBound bound = boundCell(samples_[t[0]], samples_[t[1]], samples_[t[2]],
                                           cover_, scale_, margin_, threshold, cell.source, query);
         cell.upper = bound.upper;
@@ -724,14 +733,23 @@ class Direction {
     ++counters_.rounds;
     if (batch_.empty()) return;
 
-    // Midpoint samples, shared through the edge map.
+    // Thin cells (splitThin): their longest edge, and how far the third corner is from it.
+    thin_.resize(batch_.size());
+    child_first_.resize(batch_.size() + 1);
+    child_first_[0] = 0;
+    for (size_t i = 0; i < batch_.size(); ++i) {
+      thin_[i] = thinCell(cells_[batch_[i]], tol);
+      child_first_[i + 1] = child_first_[i] + (thin_[i].thin ? 2 : 4);
+    }
+
+    // Midpoint samples, shared through the edge map (a thin cell's longest edge only).
     const uint32_t first_new = static_cast<uint32_t>(samples_.size());
     mids_.resize(3 * batch_.size());
     for (size_t i = 0; i < batch_.size(); ++i) {
       const Cell cell = cells_[batch_[i]];
       for (int k = 0; k < 3; ++k) {
         const uint32_t s = cell.corner[k], t = cell.corner[(k + 1) % 3];
-        if (s == t) {
+        if (s == t || (thin_[i].thin && k != thin_[i].edge)) {
           mids_[3 * i + k] = s;
           continue;
         }
@@ -766,9 +784,11 @@ class Direction {
     }
     threshold = std::max(lb_, other_lower) + tol;  // LB may have risen
 
-    // Children: (s0 m01 m20) (m01 s1 m12) (m20 m12 s2) (m01 m12 m20).
+    // Children: (s0 m01 m20) (m01 s1 m12) (m20 m12 s2) (m01 m12 m20); a thin cell's, the two
+    // halves of its longest edge (a b), (a m m) (m b b), as thick as it plus its third corner's
+    // distance.
     const uint32_t first_child = static_cast<uint32_t>(cells_.size());
-    cells_.resize(cells_.size() + 4 * batch_.size());
+    cells_.resize(cells_.size() + child_first_[batch_.size()]);
     forCellChunks(batch_.size(), kCellChunk, [&](size_t begin, size_t end, CellQuery& query) {
       uint64_t wins = 0;
       for (size_t i = begin; i < end; ++i) {
@@ -776,18 +796,28 @@ class Direction {
         parent.split = true;
         const uint32_t s0 = parent.corner[0], s1 = parent.corner[1], s2 = parent.corner[2];
         const uint32_t m01 = mids_[3 * i], m12 = mids_[3 * i + 1], m20 = mids_[3 * i + 2];
-        const uint32_t corners[4][3] = {
-            {s0, m01, m20}, {m01, s1, m12}, {m20, m12, s2}, {m01, m12, m20}};
-        for (int k = 0; k < 4; ++k) {
-          Cell& child = cells_[first_child + 4 * i + k];
+        uint32_t corners[4][3] = {{s0, m01, m20}, {m01, s1, m12}, {m20, m12, s2}, {m01, m12, m20}};
+        int count = 4;
+        float thickness = parent.thickness;
+        if (thin_[i].thin) {
+          const int e = thin_[i].edge;
+          const uint32_t a = parent.corner[e], b = parent.corner[(e + 1) % 3], m = mids_[3 * i + e];
+          corners[0][0] = a, corners[0][1] = m, corners[0][2] = m;
+          corners[1][0] = m, corners[1][1] = b, corners[1][2] = b;
+          count = 2;
+          thickness = thin_[i].thickness;
+        }
+        for (int k = 0; k < count; ++k) {
+          Cell& child = cells_[first_child + child_first_[i] + k];
           child = Cell{{corners[k][0], corners[k][1], corners[k][2]},
                        parent.source,
                        0,
                        static_cast<uint8_t>(parent.depth + 1),
-                       false};
+                       false,
+                       thickness};
           const CellBound bound =
               boundCell(samples_[corners[k][0]], samples_[corners[k][1]], samples_[corners[k][2]],
-                        cover_, scale_, margin_, threshold, parent.source, query);
+                        cover_, scale_, margin_ + thickness, threshold, parent.source, query);
           child.upper = bound.upper;
           wins += bound.face_won;
         }
@@ -795,7 +825,7 @@ class Direction {
       face_wins_ += wins;
     });
     counters_.triangles_refined += batch_.size();
-    counters_.cells += 4 * batch_.size();
+    counters_.cells += child_first_[batch_.size()];
     for (uint32_t c = first_child; c < cells_.size(); ++c) pushOrDrop(c, threshold);
   }
 
@@ -879,7 +909,7 @@ class Direction {
   std::vector<Sample> chunk_best_;  // [chunk] per-chunk scratch of forCellChunks
   std::vector<uint64_t> chunk_queries_;
   uint64_t rest_lineage_ = to_->restGeometry().lineage;
-  std::vector<uint32_t> batch_, mids_, new_ids_;  // per-round scratch
+  std::vector<uint32_t> batch_, mids_, new_ids_, child_first_;  // per-round scratch
   std::vector<std::pair<uint64_t, uint32_t>> order_;
   Vec3 box_lower_ = Vec3::Zero(), box_extent_ = Vec3::Ones();  // A's bounds, for Morton codes
 
@@ -889,6 +919,47 @@ class Direction {
   static bool heapBefore(const HeapEntry& x, const HeapEntry& y) {
     return x.upper != y.upper ? x.upper < y.upper : x.cell > y.cell;
   }
+
+  // Whether a cell is split as a segment (kThinFraction), along which edge (its corners edge,
+  // edge + 1), and the children's thickness then (rounded up).
+  struct ThinSplit {
+    bool thin = false;
+    int edge = 0;
+    float thickness = 0;
+  };
+  ThinSplit thinCell(const Cell& cell, double tol) const {
+    const Vec3 v[3] = {samples_[cell.corner[0]].position, samples_[cell.corner[1]].position,
+                       samples_[cell.corner[2]].position};
+    ThinSplit out;
+    double longest = -1;
+    for (int k = 0; k < 3; ++k) {
+      const double l = (v[(k + 1) % 3] - v[k]).squaredNorm();
+      if (l > longest) {
+        longest = l;
+        out.edge = k;
+      }
+    }
+    if (!(longest > 0)) return out;  // a point: split in four (it is final long before)
+    const Vec3& a = v[out.edge];
+    const Vec3 ab = v[(out.edge + 1) % 3] - a;
+    const Vec3 ac = v[(out.edge + 2) % 3] - a;
+    // The third corner's distance to the edge (its foot lies on the edge: ab is the longest),
+    // rounded up: relative 1e-12, and eps of the coordinates for the differences.
+    const double t = std::clamp(ac.dot(ab) / ab.squaredNorm(), 0.0, 1.0);
+    const double coordinates = std::max({a.cwiseAbs().maxCoeff(), v[(out.edge + 1) % 3].cwiseAbs().maxCoeff(),
+                                         v[(out.edge + 2) % 3].cwiseAbs().maxCoeff()});
+    // A repeated corner (a segment cell's, or a degenerate triangle's) is on the edge exactly.
+    const Vec3& c = v[(out.edge + 2) % 3];
+    const double width = c == a || c == v[(out.edge + 1) % 3]
+                             ? 0.0
+                             : (ac - t * ab).norm() * (1 + 1e-12) + 8 * std::numeric_limits<double>::epsilon() * coordinates;
+    const double thickness = cell.thickness + width;
+    if (!(width <= kThinFraction * tol)) return out;
+    out.thin = true;
+    out.thickness = std::nextafter(static_cast<float>(thickness), std::numeric_limits<float>::infinity());
+    return out;
+  }
+  std::vector<ThinSplit> thin_;  // per-round scratch: [batch cell]
 
   void pushOrDrop(uint32_t c, double threshold) {
     if (cells_[c].upper > threshold) {

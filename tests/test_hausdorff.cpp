@@ -458,6 +458,44 @@ TEST_CASE("relative tolerance, degenerate triangles and several components") {
   }
 }
 
+// Found by review: a degenerate triangle of A (a repeated corner, or three collinear ones) was
+// split in four children that overlap along its segment (three of them half of it each), so a
+// tight tolerance ran into gigabytes. Such a cell is split as the segment it is, in two.
+TEST_CASE("degenerate triangles of A at tight tolerances: the segment, split in two") {
+  Mesh b;  // two triangles, at right angles
+  b.positions = {Vec3(0.25, 0.5, 0.75), Vec3(0.25, 0.5, 1.0), Vec3(0.5, 0.5, 1.0),
+                 Vec3(0.5, 0.75, 0.75), Vec3(0.5, 0.75, 0.5), Vec3(0.5, 0.5, 0.5)};
+  b.triangles = {{0, 1, 2}, {3, 4, 5}};
+  // The segment from (1.25, 0.5, 1) to (1.25, 0.5, 0.5), three ways.
+  Mesh repeated;
+  repeated.positions = {Vec3(1.25, 0.5, 1.0), Vec3(1.25, 0.5, 0.5)};
+  repeated.triangles = {{0, 1, 0}};
+  Mesh coincident = repeated;
+  coincident.positions.push_back(Vec3(1.25, 0.5, 1.0));
+  coincident.triangles = {{0, 1, 2}};
+  Mesh collinear = repeated;
+  collinear.positions.push_back(Vec3(1.25, 0.5, 0.75));
+  collinear.triangles = {{0, 1, 2}};
+  // A dense brute force along the segment: its maximum is within half a spacing of h(A, B).
+  double sampled = 0;
+  const int n = 20000;
+  for (int i = 0; i <= n; ++i) sampled = std::max(sampled, bruteDistance(b, Vec3(1.25, 0.5, 1.0 - 0.5 * i / n)));
+  for (const Mesh* a : {&repeated, &coincident, &collinear}) {
+    for (double relative : {1e-10, 1e-12}) {
+      INFO("mesh " << (a == &repeated ? "repeated" : a == &coincident ? "coincident" : "collinear")
+                   << ", relative tolerance " << relative);
+      HausdorffOptions options;
+      options.relative_tolerance = relative;
+      const HausdorffResult r = hausdorffOneSided(*a, b, options);
+      CHECK(r.converged);
+      CHECK(r.upper - r.lower <= r.tolerance);
+      CHECK(r.upper >= sampled);
+      CHECK(r.lower <= sampled + 0.25 / n);
+      CHECK(r.counters.cells < 1000);  // about 2 per level: 60 at 1e-12 (gigabytes before)
+    }
+  }
+}
+
 TEST_CASE("1 and 2 threads give identical results") {
   const Mesh a = scenes::icosphere(3, 1.0);
   const Mesh b = translated(scenes::torus(0.8, 0.35, 30, 14), Vec3(0.1, 0.05, 0));
