@@ -31,7 +31,13 @@
 //    that is proven, so its own [lower, upper] may be wider than the tolerance (set
 //    HausdorffOptions::tighten_both to refine both to the tolerance);
 //  - bounds are exact up to double rounding: every upper bound carries a margin of 1e-12 times
-//    the largest coordinate magnitude, which also limits how small a tolerance can be.
+//    the largest coordinate magnitude, which also limits how small a tolerance can be; a lower
+//    bound is the computed distance of a point of A, which can exceed the true one by that
+//    rounding (identical meshes give about 3e-17 at coordinates near 1, not 0);
+//  - surfaces that coincide but are triangulated differently are split along the other's edges
+//    down to the tolerance (a point there is covered by no single face of B): cells, time and
+//    memory grow as 1 / tolerance (cube-meshed against cube: 5 s at 1e-5, 44 s and 2.3 GB at
+//    1e-6, measured by review).
 #include "core/hierarchy.h"
 
 #include <functional>
