@@ -453,7 +453,10 @@ struct DistanceService::Impl {
         ++stats.invalid_points;
         continue;
       }
-      s.candidate_count[j] = static_cast<uint32_t>(broadphase.candidates(p, d, s.candidates.data() + j * slots));
+      // Bodies within d, or within rounding of the point (surfaceRounding(): a point on a
+      // surface one ulp outside a key-framed or deforming body's exact box is still on it).
+      const double reach = std::max(d, 32 * std::numeric_limits<double>::epsilon() * p.cwiseAbs().maxCoeff());
+      s.candidate_count[j] = static_cast<uint32_t>(broadphase.candidates(p, reach, s.candidates.data() + j * slots));
       stats.pairs += s.candidate_count[j];
     }
   }
