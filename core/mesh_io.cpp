@@ -36,7 +36,9 @@
 #include <charconv>
 #include <cmath>
 #include <cstdint>
+#include <array>
 #include <cstring>
+#include <map>
 #include <filesystem>
 #include <fstream>
 #include <iostream>
@@ -841,8 +843,86 @@ std::uint32_t littleEndian32(const unsigned char* bytes) {
          std::uint32_t(bytes[3]) << 24;
 }
 
-// Decides ASCII or binary the way CGAL does, checks a binary file's size and coordinates.
-void checkStl(const std::string& path, std::istream& in, std::uint64_t file_size) {
+// An ASCII STL's words in order: 'solid' [name], then per facet 'facet' ['normal' x y z]
+// 'outer' 'loop' 3 x ('vertex' x y z) 'endloop' 'endfacet', then 'endsolid' [name]; several
+// solids may follow one another. CGAL's parser skips what it does not expect, and when it fails
+// it retries the file as binary, which for a file under 80 bytes succeeds with the facets read
+// so far: a malformed facet must be caught here. Returns the first problem, or "".
+std::string checkAsciiStl(std::istream& in) {
+  std::string line;
+  std::uint64_t line_number = 0, facets = 0;
+  bool in_solid = false, in_facet = false, in_loop = false;
+  int vertices = 0;
+  while (std::getline(in, line)) {
+    ++line_number;
+    const auto words = splitWords(line);
+    const std::string at = "line " + std::to_string(line_number) + ": ";
+    for (std::size_t k = 0; k < words.size(); ++k) {
+      const std::string_view w = words[k];
+      auto numbers = [&](const char* what) -> std::string {
+        if (k + 3 >= words.size()) return at + "'" + what + "' needs 3 numbers";
+        for (std::size_t j = k + 1; j <= k + 3; ++j) {
+          double value;
+          if (parseDouble(words[j], value) != NumberStatus::kOk)
+            return at + what + " coordinate " + shown(words[j]) + " is not a finite number";
+        }
+        k += 3;
+        return {};
+      };
+      if (!in_solid) {
+        if (w != "solid") return at + "expected 'solid', found " + shown(w);
+        in_solid = true;
+        break;  // the rest of the line is the solid's name
+      }
+      if (w == "endsolid") {
+        if (in_facet) return at + "'endsolid' inside facet " + std::to_string(facets - 1);
+        in_solid = false;
+        break;  // the rest of the line is the name
+      }
+      if (w == "facet") {
+        if (in_facet) return at + "facet " + std::to_string(facets - 1) + " has no 'endfacet'";
+        in_facet = true;
+        vertices = 0;
+        ++facets;
+        if (k + 1 < words.size() && words[k + 1] == "normal") {
+          ++k;
+          const std::string problem = numbers("normal");
+          if (!problem.empty()) return problem;
+        }
+        continue;
+      }
+      if (!in_facet) return at + "expected 'facet' or 'endsolid', found " + shown(w);
+      if (w == "outer" && k + 1 < words.size() && words[k + 1] == "loop") {
+        in_loop = true;
+        ++k;
+      } else if (w == "vertex") {  // 'outer loop' is optional to CGAL, and here
+        const std::string problem = numbers("vertex");
+        if (!problem.empty()) return problem;
+        ++vertices;
+      } else if (w == "endloop" && in_loop) {
+        in_loop = false;
+      } else if (w == "endfacet" && !in_loop) {
+        if (vertices != 3)
+          return at + "facet " + std::to_string(facets - 1) + " has " + plural(vertices, "vertex") + " (3 needed)";
+        in_facet = false;
+      } else {
+        return at + "unexpected " + shown(w) + " in facet " + std::to_string(facets - 1);
+      }
+    }
+  }
+  if (in_facet || in_solid) return "the ASCII STL ends inside " + std::string(in_facet ? "a facet" : "its solid") +
+                                   " (no 'endsolid': truncated file?)";
+  return {};
+}
+
+// Decides ASCII or binary the way CGAL does and checks an ASCII file (checkAsciiStl). A binary
+// file is read here: its triangle count must match the file size exactly and its coordinates
+// be finite (CGAL merges equal points through a std::map, where NaN compares equal to
+// anything); CGAL tries ASCII first when the 80-byte header starts with "solid ", and kept
+// facets spelled out in such a header before the file's own. Equal corners are merged into one
+// vertex, numbered in order of first use, as CGAL does. Returns true when it read the file.
+bool checkStl(const std::string& path, std::istream& in, std::uint64_t file_size,
+              std::vector<CgalPoint>& points, std::vector<Corners>& polygons) {
   constexpr std::uint64_t kHeaderBytes = 84, kTriangleBytes = 50;
   unsigned char header[kHeaderBytes] = {};
   in.read(reinterpret_cast<char*>(header), kHeaderBytes);
@@ -856,54 +936,49 @@ void checkStl(const std::string& path, std::istream& in, std::uint64_t file_size
   const bool binary_size = got == kHeaderBytes &&
                            kHeaderBytes + kTriangleBytes * triangles == file_size;
   if (solid && !binary_size) {
-    // ASCII: CGAL grows its arrays while it reads. A file cut short must fail, but when CGAL's
-    // ASCII parse fails it retries as binary, and its binary parser calls a file shorter than
-    // 80 bytes empty and succeeds, keeping the facets read so far; so look for the end here.
-    constexpr std::uint64_t kTail = 4096;
-    const std::uint64_t tail_start = file_size > kTail ? file_size - kTail : 0;
-    std::string tail(file_size - tail_start, '\0');
-    in.clear();
-    in.seekg(static_cast<std::streamoff>(tail_start));
-    in.read(tail.data(), static_cast<std::streamsize>(tail.size()));
-    if (tail.find("endsolid") == std::string::npos)
-      fail(path, "the ASCII STL has no 'endsolid' at its end (truncated file)");
-    // Vertex lines: three finite numbers each (CGAL only says the file is malformed).
+    // ASCII: CGAL grows its arrays while it reads; the structure is checked here.
     in.clear();
     in.seekg(0);
-    std::string line;
-    std::uint64_t line_number = 0;
-    while (std::getline(in, line)) {
-      ++line_number;
-      const auto words = splitWords(line);
-      if (words.empty() || words[0] != "vertex") continue;
-      const std::string at = "line " + std::to_string(line_number) + ": ";
-      if (words.size() < 4) fail(path, at + "a vertex needs 3 coordinates");
-      for (std::size_t k = 1; k <= 3; ++k) {
-        double value;
-        if (parseDouble(words[k], value) != NumberStatus::kOk)
-          fail(path, at + "vertex coordinate " + shown(words[k]) + " is not a finite number");
-      }
-    }
-    return;
+    const std::string problem = checkAsciiStl(in);
+    if (!problem.empty()) fail(path, problem);
+    return false;
   }
   if (got < kHeaderBytes)
     fail(path, "not an ASCII STL (no 'solid') and too short for a binary STL (" +
                    std::to_string(file_size) + " bytes; the binary header alone has 84)");
-  if (kHeaderBytes + kTriangleBytes * triangles > file_size)
-    fail(path, "the binary STL header declares " + plural(triangles, "triangle") +
-                   ", which need " + std::to_string(kHeaderBytes + kTriangleBytes * triangles) +
-                   " bytes, but the file has " + std::to_string(file_size) +
+  const std::uint64_t needed = kHeaderBytes + kTriangleBytes * triangles;
+  if (needed > file_size)
+    fail(path, "the binary STL header declares " + plural(triangles, "triangle") + ", which need " +
+                   std::to_string(needed) + " bytes, but the file has " + std::to_string(file_size) +
                    " (truncated file)");
+  if (needed < file_size)
+    fail(path, "the binary STL header declares " + plural(triangles, "triangle") + " (" +
+                   std::to_string(needed) + " bytes) but the file has " + std::to_string(file_size - needed) +
+                   " more bytes (a wrong triangle count?)");
+  std::map<std::array<float, 3>, std::size_t> index;  // corner -> vertex
+  polygons.reserve(static_cast<std::size_t>(triangles));
   unsigned char record[kTriangleBytes];
   for (std::uint64_t t = 0; t < triangles; ++t) {
     if (!in.read(reinterpret_cast<char*>(record), kTriangleBytes))
       fail(path, "read error in binary STL triangle " + std::to_string(t));
-    for (int k = 3; k < 12; ++k) {  // the 9 corner coordinates after the normal
-      const std::uint32_t bits = littleEndian32(record + 4 * k);
-      if ((bits & 0x7f800000u) == 0x7f800000u)
-        fail(path, "binary STL triangle " + std::to_string(t) + " has a non-finite coordinate");
+    Corners corners;
+    for (int c = 0; c < 3; ++c) {
+      std::array<float, 3> x;
+      for (int axis = 0; axis < 3; ++axis) {  // the 9 corner coordinates after the normal
+        const std::uint32_t bits = littleEndian32(record + 4 * (3 + 3 * c + axis));
+        if ((bits & 0x7f800000u) == 0x7f800000u)
+          fail(path, "binary STL triangle " + std::to_string(t) + " has a non-finite coordinate");
+        float value;
+        std::memcpy(&value, &bits, sizeof value);
+        x[axis] = value + 0.0f;  // -0 and 0 are one point
+      }
+      const auto [it, added] = index.emplace(x, points.size());
+      if (added) points.emplace_back(x[0], x[1], x[2]);
+      corners.push_back(it->second);
     }
+    polygons.push_back(std::move(corners));
   }
+  return true;
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -945,11 +1020,13 @@ Mesh readMesh(const std::string& path) {
       break;
     }
     case Format::kStl:
-      checkStl(path, in, file_size);
-      break;
+      break;  // below: a binary file is read by checkStl
     case Format::kObj:
       break;
   }
+  std::vector<CgalPoint> points;
+  std::vector<Corners> polygons;
+  const bool read_here = format == Format::kStl && checkStl(path, in, file_size, points, polygons);
   // OBJ goes to CGAL from memory, blanks made spaces (its reader splits corners on spaces only),
   // after the strict check of its faces.
   std::istringstream obj_text;
@@ -970,6 +1047,22 @@ Mesh readMesh(const std::string& path) {
     }
     const std::string problem = checkObjFaces(text);
     if (!problem.empty()) fail(path, problem);
+    // Corners checked, each is cut to its vertex index: CGAL skips what follows the integer
+    // with ignore(256, ' '), so a longer '/t/n' part was read on as further corners.
+    for (size_t at = 0; at < text.size();) {
+      const size_t end = std::min(text.find('\n', at), text.size());
+      size_t first = at;
+      while (first < end && text[first] == ' ') ++first;
+      if (first + 1 < end && text[first] == 'f' && text[first + 1] == ' ') {
+        bool in_suffix = false;
+        for (size_t i = first + 1; i < end; ++i) {
+          if (text[i] == ' ' || text[i] == '\r') in_suffix = false;
+          else if (text[i] == '/') in_suffix = true;
+          if (in_suffix) text[i] = ' ';
+        }
+      }
+      at = end + 1;
+    }
     obj_text.str(std::move(text));
   }
   std::istream& source = format == Format::kObj ? static_cast<std::istream&>(obj_text) : in;
@@ -981,10 +1074,8 @@ Mesh readMesh(const std::string& path) {
   in.seekg(0);
   if (!in) fail(path, "cannot rewind the file");
 
-  std::vector<CgalPoint> points;
-  std::vector<Corners> polygons;
-  bool ok = false;
-  try {
+  bool ok = read_here;
+  if (!read_here) try {
     const auto quiet = CGAL::parameters::verbose(false);
     switch (format) {
       case Format::kOff: ok = CGAL::IO::read_OFF(in, points, polygons, quiet); break;

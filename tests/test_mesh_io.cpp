@@ -216,6 +216,12 @@ TEST_CASE("OBJ: order kept, v/vt/vn faces, negative indices, ignored statements"
   CHECK(mesh.positions == kSquare);
   const std::vector<Triangle> expected = {{0, 1, 2}, {0, 2, 3}, {3, 2, 0}, {0, 2, 3}};
   CHECK(mesh.triangles == expected);
+  // A corner's '/t/n' part longer than 256 characters (found by review: CGAL skips 256 after
+  // the index and read the rest, here '4', as a further corner, making a quad).
+  const Mesh long_corner = meshsweeper::readMesh(dir.write("long.obj",
+      "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nvt 0 0\nf 1/" + std::string(255, '0') + "4/1 2 3\n"));
+  const std::vector<Triangle> one = {{0, 1, 2}};
+  CHECK(long_corner.triangles == one);
 }
 
 TEST_CASE("ASCII PLY: order kept, extra properties skipped, polygons fan-triangulated", "[mesh_io]") {
@@ -361,7 +367,10 @@ TEST_CASE("binary STL, also with a header that starts with 'solid'", "[mesh_io]"
   TempDir dir;
   const std::vector<std::array<Vec3, 3>> triangles = {{kSquare[0], kSquare[1], kSquare[2]},
                                                       {kSquare[0], kSquare[2], kSquare[3]}};
-  for (const std::string header : {"binary written by the test", "solid but binary"}) {
+  // The last header spells out a facet (found by review: CGAL read it as ASCII first and kept
+  // that facet before the file's own triangles).
+  for (const std::string header : {"binary written by the test", "solid but binary",
+                                   "solid a facet vertex 5 5 5 vertex 6 5 5 vertex 5 6 5 endfacet"}) {
     INFO(header);
     const Mesh mesh = meshsweeper::readMesh(dir.write("square.stl", binaryStl(header, triangles, 2)));
     CHECK(mesh.positions == kSquare);  // 6 corners in the file, 4 distinct points
@@ -418,7 +427,7 @@ TEST_CASE("readMesh refuses garbage in every format", "[mesh_io]") {
   CHECK_THAT(readError(dir.write("bad.stl", "solid x\nfacet normal 0 0 1\nouter loop\n"
                                             "vertex 0 0 0\nvertex 1 0 0\nendloop\nendfacet\n"
                                             "endsolid x\n")),
-             Contains("malformed ASCII STL"));
+             Contains("facet 0 has 2 vertices (3 needed)"));
   for (const char* bad : {"nan", "inf", "1e400", "x"}) {
     CHECK_THAT(readError(dir.write("nan.stl", std::string("solid x\nfacet normal 0 0 1\nouter loop\n"
                                                           "vertex 0 0 0\nvertex ") + bad +
@@ -515,6 +524,26 @@ TEST_CASE("readMesh refuses truncated files", "[mesh_io]") {
   CHECK_THAT(readError(dir.write("cut_ascii.stl", "solid x\nfacet normal 0 0 1\nouter loop\n"
                                                   "vertex 0 0 0\nvertex 1 0 0\n")),
              Contains("truncated"));
+  // Found by review: a binary count below the data read part of the file silently, and an ASCII
+  // file under 80 bytes lost its malformed facet (CGAL's binary retry called it empty).
+  stl = binaryStl("binary", {one[0], one[0], one[0]}, 2);
+  CHECK_THAT(readError(dir.write("count_low.stl", stl)),
+             Contains("declares 2 triangles (184 bytes) but the file has 50 more bytes (a wrong triangle count?)"));
+  stl = binaryStl("binary", one, 1) + "garbage!";
+  CHECK_THAT(readError(dir.write("extra.stl", stl)), Contains("8 more bytes"));
+  CHECK_THAT(readError(dir.write("short.stl", "solid\nfacet vertex 0 0 0 vertex 1 0 0 vertex 0 1 0 endfacet\nfacet\nendsolid")),
+             Contains("line 4: 'endsolid' inside facet 1"));
+  CHECK_THAT(readError(dir.write("two_vertices.stl", "solid x\nfacet normal 0 0 1\nouter loop\n"
+                                                     "vertex 0 0 0\nvertex 1 0 0\nendloop\nendfacet\nendsolid x\n")),
+             Contains("line 7: facet 0 has 2 vertices (3 needed)"));
+  CHECK_THAT(readError(dir.write("stray.stl", "solid x\nfacet normal 0 0 1\nouter loop\nvertex 0 0 0\n"
+                                              "vertex 1 0 0\nvertex 0 1 0\nendloop\nendfacet\nbogus\nendsolid x\n")),
+             Contains("line 9: expected 'facet' or 'endsolid', found 'bogus'"));
+  // One line per facet, no 'outer loop', two solids: valid.
+  const Mesh flat = meshsweeper::readMesh(dir.write("flat.stl",
+      "solid a\nfacet vertex 0 0 0 vertex 1 0 0 vertex 0 1 0 endfacet\nendsolid a\n"
+      "solid b\nfacet normal 0 0 1 outer loop vertex 0 0 0 vertex 0 1 0 vertex -1 0 0 endloop endfacet endsolid\n"));
+  CHECK(flat.triangles.size() == 2);
 }
 
 TEST_CASE("readMesh refuses absurd counts before allocating for them", "[mesh_io]") {
