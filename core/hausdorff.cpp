@@ -16,8 +16,8 @@
 //       (hash map keyed by the edge's two sample ids); query the new ones (Morton order,
 //       parallel chunks; each warm-started from the closest face of its edge's nearer end)
 //     LB <- max(LB, new sample distances)
-//     each popped cell -> 4 children (corners and edge midpoints), or 2 for a degenerate one
-//       (the halves of the segment it is, kThinFraction); bound each child;
+//     each popped cell -> 4 children (corners and edge midpoints), or 2 for a thin one (the
+//       halves of its longest edge, its width a margin: kThinFraction); bound each child;
 //       push it if its UB > threshold, else it is final ("dropped")
 //   until the highest UB <= threshold
 //   upper = max(LB, highest UB left, highest UB dropped) <= LB + tol
@@ -162,8 +162,9 @@ struct Cell {
   double upper;          // certified bound of d(x, B) over the cell
   uint8_t depth;         // 0 for an original triangle
   bool split;            // replaced by its children
-  float thickness;       // every point of the piece of A is this close to the cell (a segment
-                         // standing for a thin piece, splitThin); 0 for a triangle
+  float thickness;       // every point of the piece of A is within thickness * scale of the
+                         // cell (a segment standing for a thin piece, thinCell; relative to
+                         // the coordinates' scale, so that it fits a float); 0 for a triangle
 };
 
 // Edge (two sample ids) -> midpoint sample id; open addressing, linear probing.
@@ -738,8 +739,11 @@ class Direction {
     child_first_.resize(batch_.size() + 1);
     child_first_[0] = 0;
     for (size_t i = 0; i < batch_.size(); ++i) {
-      thin_[i] = thinCell(cells_[batch_[i]], tol);
+      const Cell& cell = cells_[batch_[i]];
+      thin_[i] = thinCell(cell, tol);
       child_first_[i + 1] = child_first_[i] + (thin_[i].thin ? 2 : 4);
+      // A thin cell with area keeps it for mean and RMS, taken over it now: its segments have none.
+      if (thin_[i].thin && thin_[i].area > 0) addToMean(cell, thin_[i].area, thin_sums_);
     }
 
     // Midpoint samples, shared through the edge map (a thin cell's longest edge only).
@@ -798,7 +802,7 @@ class Direction {
         const uint32_t m01 = mids_[3 * i], m12 = mids_[3 * i + 1], m20 = mids_[3 * i + 2];
         uint32_t corners[4][3] = {{s0, m01, m20}, {m01, s1, m12}, {m20, m12, s2}, {m01, m12, m20}};
         int count = 4;
-        float thickness = parent.thickness;
+        float thickness = parent.thickness;  // relative (Cell::thickness)
         if (thin_[i].thin) {
           const int e = thin_[i].edge;
           const uint32_t a = parent.corner[e], b = parent.corner[(e + 1) % 3], m = mids_[3 * i + e];
@@ -817,7 +821,7 @@ class Direction {
                        thickness};
           const CellBound bound =
               boundCell(samples_[corners[k][0]], samples_[corners[k][1]], samples_[corners[k][2]],
-                        cover_, scale_, margin_ + thickness, threshold, parent.source, query);
+                        cover_, scale_, margin_ + absoluteThickness(thickness), threshold, parent.source, query);
           child.upper = bound.upper;
           wins += bound.face_won;
         }
@@ -843,19 +847,16 @@ class Direction {
     // Mean and RMS: the distance taken as linear over each final cell between its corners'
     // exact distances, integrated exactly (int L = A (d0+d1+d2)/3,
     // int L^2 = A (d0^2+d1^2+d2^2 + d0 d1 + d1 d2 + d2 d0) / 6).
-    double area = 0, sum = 0, sum2 = 0;
+    MeanSums sums = thin_sums_;
     for (const Cell& cell : cells_) {
       if (cell.split) continue;
       const Sample& s0 = samples_[cell.corner[0]];
       const Sample& s1 = samples_[cell.corner[1]];
       const Sample& s2 = samples_[cell.corner[2]];
-      const double cell_area =
-          0.5 * (s1.position - s0.position).cross(s2.position - s0.position).norm();
-      const double d0 = s0.distance, d1 = s1.distance, d2 = s2.distance;
-      area += cell_area;
-      sum += cell_area * (d0 + d1 + d2) / 3;
-      sum2 += cell_area * (d0 * d0 + d1 * d1 + d2 * d2 + d0 * d1 + d1 * d2 + d2 * d0) / 6;
+      addToMean(cell, 0.5 * (s1.position - s0.position).cross(s2.position - s0.position).norm(), sums);
     }
+    const double area = sums.area;
+    double sum = sums.sum, sum2 = sums.sum2;
     const size_t nv = from_.positions.size();
     out.vertex_distance.assign(nv, kNaN);
     for (VertexIndex v = 0; v < nv; ++v) out.vertex_distance[v] = samples_[v].distance;
@@ -925,7 +926,8 @@ class Direction {
   struct ThinSplit {
     bool thin = false;
     int edge = 0;
-    float thickness = 0;
+    float thickness = 0;  // relative, as Cell::thickness
+    double area = 0;      // the cell's (its segments have none)
   };
   ThinSplit thinCell(const Cell& cell, double tol) const {
     const Vec3 v[3] = {samples_[cell.corner[0]].position, samples_[cell.corner[1]].position,
@@ -953,13 +955,32 @@ class Direction {
     const double width = c == a || c == v[(out.edge + 1) % 3]
                              ? 0.0
                              : (ac - t * ab).norm() * (1 + 1e-12) + 8 * std::numeric_limits<double>::epsilon() * coordinates;
-    const double thickness = cell.thickness + width;
+    const double thickness = absoluteThickness(cell.thickness) + width;
     if (!(width <= kThinFraction * tol)) return out;
     out.thin = true;
-    out.thickness = std::nextafter(static_cast<float>(thickness), std::numeric_limits<float>::infinity());
+    out.thickness = std::nextafter(static_cast<float>(thickness / scale_), std::numeric_limits<float>::infinity());
+    out.area = 0.5 * ab.cross(ac).norm();
     return out;
   }
+  // A cell's thickness in mesh units, rounded up.
+  double absoluteThickness(float relative) const {
+    return relative > 0 ? static_cast<double>(relative) * scale_ * (1 + 1e-15) : 0.0;
+  }
   std::vector<ThinSplit> thin_;  // per-round scratch: [batch cell]
+
+  // Mean and RMS integrals: area, integral of the distance and of its square.
+  struct MeanSums {
+    double area = 0, sum = 0, sum2 = 0;
+  };
+  // Adds a final cell (or a thin one split as segments) to `sums`.
+  void addToMean(const Cell& cell, double cell_area, MeanSums& sums) const {
+    const double d0 = samples_[cell.corner[0]].distance, d1 = samples_[cell.corner[1]].distance,
+                 d2 = samples_[cell.corner[2]].distance;
+    sums.area += cell_area;
+    sums.sum += cell_area * (d0 + d1 + d2) / 3;
+    sums.sum2 += cell_area * (d0 * d0 + d1 * d1 + d2 * d2 + d0 * d1 + d1 * d2 + d2 * d0) / 6;
+  }
+  MeanSums thin_sums_;  // of the thin cells split as segments
 
   void pushOrDrop(uint32_t c, double threshold) {
     if (cells_[c].upper > threshold) {

@@ -75,7 +75,7 @@ struct HausdorffCounters {
   uint64_t samples = 0;            // points of A whose distance to B was computed
   uint64_t queries = 0;            // closest-point queries on B
   uint64_t triangles_tested = 0;   // exact point-triangle distances inside those queries
-  uint64_t triangles_refined = 0;  // (sub)triangles of A split into four
+  uint64_t triangles_refined = 0;  // (sub)triangles of A split (in four, or a thin one in two)
   uint64_t cells = 0;              // (sub)triangles bounded (original triangles included)
   uint64_t face_bound_wins = 0;    // cells bounded by faces of B (cover bound), not by the
                                    // corner bound (hausdorff.cpp) or bisectors

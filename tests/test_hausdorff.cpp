@@ -496,6 +496,34 @@ TEST_CASE("degenerate triangles of A at tight tolerances: the segment, split in 
   }
 }
 
+// Found by review of the thin split: a thin cell with area (a sliver) lost its area to its
+// segments (area 0, the mean fell back to the vertices'), and at 1e45 its width overflowed a
+// float margin, so every bound was infinite and refinement ran out of memory.
+TEST_CASE("thin triangles of A: area kept, any scale") {
+  for (double scale : {1.0, 1e45, 1e-45}) {
+    INFO("scale " << scale);
+    Mesh a;  // a sliver of width 5e-7: thin at tolerance 1e-3
+    a.positions = {Vec3(0, 0, 0), Vec3(1, 0, 0), Vec3(0.5, 5e-7, 0)};
+    a.triangles = {{0, 1, 2}};
+    Mesh b;
+    b.positions = {Vec3(0, 0, 0.1), Vec3(0.01, 0, 0.1), Vec3(0, 0.01, 0.1),
+                   Vec3(1, 0, 0.1), Vec3(0.99, 0, 0.1), Vec3(1, 0.01, 0.1)};
+    b.triangles = {{0, 1, 2}, {3, 5, 4}};
+    for (Vec3& x : a.positions) x *= scale;
+    for (Vec3& x : b.positions) x *= scale;
+    HausdorffOptions options;
+    options.tolerance = 1e-3 * scale;
+    const HausdorffResult r = hausdorffOneSided(a, b, options);
+    CHECK(r.converged);
+    CHECK(r.upper - r.lower <= r.tolerance);
+    CHECK(r.a_to_b.area == Approx(0.5 * 5e-7 * scale * scale).epsilon(1e-9));
+    CHECK(r.counters.cells < 100);
+    double sampled = 0;  // along the long edge, where the distance peaks at its middle
+    for (int i = 0; i <= 1000; ++i) sampled = std::max(sampled, bruteDistance(b, Vec3(scale * i / 1000.0, 0, 0)));
+    CHECK(r.upper >= sampled);
+  }
+}
+
 TEST_CASE("1 and 2 threads give identical results") {
   const Mesh a = scenes::icosphere(3, 1.0);
   const Mesh b = translated(scenes::torus(0.8, 0.35, 30, 14), Vec3(0.1, 0.05, 0));
@@ -664,12 +692,19 @@ TEST_CASE("printed bounds round outward") {
   CHECK(outwardBound(0.110499, 7, true) == "0.110499");
   CHECK(outwardBound(0.106003, 7, true) == "0.1060031");
   CHECK(outwardBound(0.106003, 7, false) == "0.106003");
+  // Just above a power of ten (found by review: the step was taken from log10, an ulp short of
+  // -3 there, so the text never moved and the bound came out in 767 digits).
+  CHECK(outwardBound(std::nextafter(0.001, 1.0), 7, true) == "0.001000001");
+  CHECK(outwardBound(1.00000000100009998e-03, 7, true) == "0.001000001");
+  CHECK(outwardBound(std::nextafter(1e-30, 1.0), 3, true) == "1.01e-30");
+  CHECK(outwardBound(-std::nextafter(0.001, 1.0), 7, false) == "-0.001000001");
   std::mt19937_64 rng(3);
   for (int i = 0; i < 20000; ++i) {
     const double x = std::ldexp(static_cast<double>(rng() >> 11), static_cast<int>(rng() % 200) - 150) *
                      (rng() & 1 ? 1 : -1);
     for (bool up : {false, true}) {
       const std::string b = outwardBound(x, 7, up), f = outwardFixed(x, 5, up);
+      CHECK(b.size() <= 16);  // 7 digits, a sign, a point and an exponent: never the expansion
       CHECK((up ? compareDecimal(b, x) >= 0 : compareDecimal(b, x) <= 0));
       CHECK((up ? compareDecimal(f, x) >= 0 : compareDecimal(f, x) <= 0));
       // Where long double decides (the text more than an ulp of it away), it agrees.
