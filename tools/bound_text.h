@@ -90,9 +90,11 @@ inline std::string outwardBound(double x, int digits, bool up) {
     const long double shown = std::strtold(text, nullptr);
     const int side = compareDecimal(text, x);
     if (up ? side >= 0 : side <= 0) return text;
-    // One unit of the last digit shown beyond the rounded value, in the needed direction.
+    // One unit of the last digit shown beyond the rounded value, in the needed direction; its
+    // place is read off the text (log10 of a power of ten can fall an ulp short of the integer,
+    // and a unit ten times too small never changed the text; found by review).
     const long double unit = shown == 0 ? std::fabs(target)
-                                        : std::pow(10.0L, std::floor(std::log10(std::fabs(shown))) - (digits - 1));
+                                        : std::pow(10.0L, detail::parseDecimal(text).exponent - (digits - 1));
     y = up ? shown + unit : shown - unit;
   }
   return detail::exactText(x);  // not reached in practice: x itself, exactly
