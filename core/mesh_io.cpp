@@ -10,9 +10,9 @@
 //        against the file size, every list length against the bytes left (CGAL resizes to it),
 //        and the property types CGAL can read (a vertex 'x' declared 'int' makes CGAL 5.5
 //        dereference a null pointer; an unknown type makes it misread the rest of the file).
-//   STL  A binary file's triangle count is compared with the file size and its coordinates must
-//        be finite (CGAL merges equal points through a std::map, where NaN compares equal to
-//        anything).
+//   STL  A binary file is read here (its triangle count must match the file size, its
+//        coordinates be finite); an ASCII file's structure is checked word by word before CGAL
+//        reads it (checkStl).
 //   OBJ  Nothing to check ahead: CGAL grows its arrays while it reads.
 // CGAL's readers only say true or false; when they say false for an OFF or OBJ file, the file is
 // scanned again here to name the line and the problem.
@@ -991,7 +991,7 @@ std::string cgalRejected(Format format, const std::string& diagnosis) {
              "indices below the vertex count)";
     case Format::kObj:
       return "malformed OBJ file (a 'v' line without 3 numbers, an unsupported statement such "
-             "as 'l', or no vertices or faces)";
+             "as 'curv', or no vertices or faces)";
     case Format::kPly:
       return "malformed PLY data (CGAL's reader stopped before the end)";
     case Format::kStl:

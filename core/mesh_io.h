@@ -13,11 +13,12 @@ namespace meshsweeper {
 // (case-insensitive), through CGAL's polygon-soup readers.
 // Vertex order and face order are the file's; polygons are fan-triangulated in face order
 // (face f with corners c0..ck gives (c0,c1,c2), (c0,c2,c3), ...), so a result's triangle index
-// indexes that triangle list. Exception: STL stores three corners per triangle and no vertices;
-// CGAL merges corners with exactly equal coordinates into one vertex, numbered in order of first
-// appearance, so an STL mesh has shared vertices and triangle t is the file's triangle t.
-// Degenerate triangles, duplicate and isolated vertices are kept. Binary OFF, SKEL, nOFF, OBJ
-// 'l' lines and polygons of more than 2^20 corners are refused.
+// indexes that triangle list (a polygon that its first corner does not see whole is cut into
+// ears instead; README "Mesh input"). Exception: STL stores three corners per triangle and no
+// vertices; corners with exactly equal coordinates are merged into one vertex, numbered in order
+// of first appearance, so an STL mesh has shared vertices and triangle t is the file's triangle
+// t. Degenerate triangles, duplicate and isolated vertices are kept; OBJ 'l' (line) elements are
+// skipped. Binary OFF, SKEL, nOFF and polygons of more than 2^20 corners are refused.
 // Throws MeshError ("PATH: problem") on a missing, unreadable, truncated or garbage file, header
 // counts the file size cannot hold (checked before anything is allocated), non-finite
 // coordinates, out-of-range indices, a face with fewer than 3 corners or a mesh without faces.
