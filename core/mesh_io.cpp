@@ -633,6 +633,11 @@ PlyHeader parsePlyHeader(const std::string& path, std::istream& in) {
       } else {
         fail(path, at + "expected 'property TYPE NAME' or 'property list TYPE TYPE NAME'");
       }
+      // CGAL would take one of two properties of one name and ignore the other (found by review).
+      for (const PlyProperty& other : header.elements.back().properties)
+        if (other.name == property.name)
+          fail(path, at + "property " + shown(property.name) + " declared twice in element '" +
+                         header.elements.back().name + "'");
       header.elements.back().properties.push_back(property);
     } else {
       fail(path, at + "unexpected " + shown(words[0]));
@@ -755,14 +760,20 @@ void walkBinaryPly(const std::string& path, std::istream& in, const PlyHeader& h
 
 // Reads the next whitespace-separated word of an ASCII PLY body; false at the end.
 bool nextPlyWord(std::streambuf& buffer, std::string& word) {
+  constexpr std::size_t kMaxWord = std::size_t(1) << 16;
   word.clear();
   int c;
   while ((c = buffer.sgetc()) != EOF && std::isspace(c)) buffer.sbumpc();
+  bool cut = false;
   while ((c = buffer.sgetc()) != EOF && !std::isspace(c)) {
-    word += static_cast<char>(c);
+    // The whole word is consumed (a number written with 600 digits is one value; cutting it
+    // at 512 read its end as the next value, found by review); beyond 64 KiB only its start is
+    // kept, and it is reported as not a number.
+    if (word.size() < kMaxWord) word += static_cast<char>(c);
+    else cut = true;
     buffer.sbumpc();
-    if (word.size() > 512) break;  // no number is that long: reported as not a number
   }
+  if (cut) word += " (cut)";
   return !word.empty();
 }
 
@@ -1161,7 +1172,30 @@ std::vector<Vec3> readPoints(const std::string& path) {
   std::vector<Vec3> points;
   std::string line;
   std::uint64_t line_number = 0;
-  while (nextDataLine(in, line, line_number)) {
+  // Lines are read with a cap: a file without line breaks (/dev/zero) would grow one without
+  // end (found by review).
+  constexpr std::size_t kMaxLine = std::size_t(1) << 20;
+  auto nextLine = [&]() -> bool {
+    std::streambuf& buffer = *in.rdbuf();
+    while (true) {
+      line.clear();
+      int c = buffer.sbumpc();
+      if (c == EOF) return false;
+      ++line_number;
+      while (c != EOF && c != '\n') {
+        if (line.size() == kMaxLine)
+          throw MeshError(name + ":" + std::to_string(line_number) + ": line longer than " +
+                          std::to_string(kMaxLine) + " bytes (not a points file?)");
+        line.push_back(static_cast<char>(c));
+        c = buffer.sbumpc();
+      }
+      const std::size_t hash = line.find('#');
+      if (hash != std::string::npos) line.resize(hash);
+      if (!splitWords(line).empty()) return true;
+      if (c == EOF) return false;
+    }
+  };
+  while (nextLine()) {
     const auto words = splitWords(line);
     const std::string at = name + ":" + std::to_string(line_number) + ": ";
     if (words.size() != 3)

@@ -723,6 +723,22 @@ TEST_CASE("writeOff writes what readMesh reads back exactly", "[mesh_io]") {
   CHECK_THROWS_AS(meshsweeper::writeOff(mesh, dir.file("no/such/folder/out.off")), MeshError);
 }
 
+// Found by review: a property declared twice was taken once (the other ignored), and a value
+// written with over 512 characters was cut there, its end read as the next value.
+TEST_CASE("ASCII PLY: repeated properties refused, long values read whole", "[mesh_io]") {
+  TempDir dir;
+  const std::string twice = dir.write("twice.ply",
+      "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float x\nproperty float y\n"
+      "property float z\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n"
+      "9 0 0 0\n9 1 0 0\n9 0 1 0\n3 0 1 2\n");
+  CHECK_THAT(readError(twice), Contains("PLY header line 5: property 'x' declared twice in element 'vertex'"));
+  const Mesh mesh = meshsweeper::readMesh(dir.write("long.ply",
+      "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
+      "element face 1\nproperty list uchar int vertex_indices\nend_header\n"
+      "0." + std::string(600, '0') + " 0 0\n1 0 0\n0 1 0\n3 0 1 2\n"));
+  CHECK(mesh.positions == std::vector<Vec3>{{0, 0, 0}, {1, 0, 0}, {0, 1, 0}});
+}
+
 TEST_CASE("readPoints: one point a line, comments and blank lines ignored", "[mesh_io]") {
   TempDir dir;
   const std::string path = dir.write("points.txt",
@@ -758,6 +774,9 @@ TEST_CASE("readPoints refuses malformed lines with 'PATH:LINE: problem'", "[mesh
   CHECK(meshsweeper::readPoints(dir.write("limit.txt", "-1e150 0 1e150\n")).size() == 1);
   const std::string missing = dir.file("missing.txt");
   CHECK_THAT(pointsError(missing), StartsWith(missing + ": ") && Contains("no such file"));
+  // A line without end (found by review: /dev/zero grew one until memory ran out).
+  const std::string endless = dir.write("endless.txt", "0 0 0\n" + std::string(3 << 20, '0'));
+  CHECK_THAT(pointsError(endless), StartsWith(endless + ":2: ") && Contains("line longer than 1048576 bytes"));
 }
 
 TEST_CASE("readPoints reads standard input for '-'", "[mesh_io]") {
