@@ -1,6 +1,7 @@
 // Reading meshes and point lists (core/mesh_io.h).
 //
-// Meshes are read by CGAL 5.5's polygon-soup readers, which keep the file's vertex and face order.
+// Meshes are read by CGAL 5.5's polygon-soup readers, which keep the file's vertex and face order,
+// except binary STL, read here (a simple fixed layout, which CGAL misread after a "solid" header).
 // Those readers trust their input, so every file is checked before CGAL sees it:
 //
 //   OFF  The header is parsed here and its counts compared with the file size (CGAL resizes its
@@ -773,7 +774,7 @@ bool nextPlyWord(std::streambuf& buffer, std::string& word) {
     else cut = true;
     buffer.sbumpc();
   }
-  if (cut) word += " (cut)";
+  if (cut) word = "<a value over 65536 characters>";
   return !word.empty();
 }
 
@@ -861,7 +862,7 @@ std::uint32_t littleEndian32(const unsigned char* bytes) {
 // so far: a malformed facet must be caught here. Returns the first problem, or "".
 std::string checkAsciiStl(std::istream& in) {
   std::string line;
-  std::uint64_t line_number = 0, facets = 0;
+  std::uint64_t line_number = 0, facets = 0, solids = 0;
   bool in_solid = false, in_facet = false, in_loop = false;
   int vertices = 0;
   while (std::getline(in, line)) {
@@ -881,13 +882,16 @@ std::string checkAsciiStl(std::istream& in) {
         return {};
       };
       if (!in_solid) {
-        if (w != "solid") return at + "expected 'solid', found " + shown(w);
+        // After an 'endsolid', what is not another solid is ignored, as CGAL does (a DOS
+        // end-of-file byte, padding, a trailing line).
+        if (w != "solid") return facets > 0 || solids > 0 ? std::string() : at + "expected 'solid', found " + shown(w);
         in_solid = true;
         break;  // the rest of the line is the solid's name
       }
       if (w == "endsolid") {
         if (in_facet) return at + "'endsolid' inside facet " + std::to_string(facets - 1);
         in_solid = false;
+        ++solids;
         break;  // the rest of the line is the name
       }
       if (w == "facet") {
@@ -895,10 +899,11 @@ std::string checkAsciiStl(std::istream& in) {
         in_facet = true;
         vertices = 0;
         ++facets;
+        // A normal's three words are not read (by CGAL either): exporters write 'nan' there for
+        // degenerate facets.
         if (k + 1 < words.size() && words[k + 1] == "normal") {
-          ++k;
-          const std::string problem = numbers("normal");
-          if (!problem.empty()) return problem;
+          if (k + 4 >= words.size()) return at + "'normal' needs 3 numbers";
+          k += 4;
         }
         continue;
       }
@@ -951,7 +956,16 @@ bool checkStl(const std::string& path, std::istream& in, std::uint64_t file_size
     in.clear();
     in.seekg(0);
     const std::string problem = checkAsciiStl(in);
-    if (!problem.empty()) fail(path, problem);
+    if (!problem.empty()) {
+      // A binary file whose header starts with "solid " and whose size does not match its
+      // count is taken for ASCII: say what it would be as binary too.
+      const std::uint64_t needed = kHeaderBytes + kTriangleBytes * triangles;
+      if (got == kHeaderBytes && needed <= file_size && triangles > 0)
+        fail(path, "not a valid ASCII STL (" + problem + "), nor a binary one: its header declares " +
+                       plural(triangles, "triangle") + " (" + std::to_string(needed) + " bytes) but the file has " +
+                       std::to_string(file_size - needed) + " more bytes");
+      fail(path, problem);
+    }
     return false;
   }
   if (got < kHeaderBytes)

@@ -10,7 +10,8 @@
 namespace meshsweeper {
 
 // Reads OFF, OBJ, PLY (ASCII or binary) or STL (ASCII or binary), chosen by extension
-// (case-insensitive), through CGAL's polygon-soup readers.
+// (case-insensitive), through CGAL's polygon-soup readers (binary STL by the project's own
+// reader), each file checked first (README "Mesh input").
 // Vertex order and face order are the file's; polygons are fan-triangulated in face order
 // (face f with corners c0..ck gives (c0,c1,c2), (c0,c2,c3), ...), so a result's triangle index
 // indexes that triangle list (a polygon that its first corner does not see whole is cut into

@@ -539,6 +539,17 @@ TEST_CASE("readMesh refuses truncated files", "[mesh_io]") {
   CHECK_THAT(readError(dir.write("stray.stl", "solid x\nfacet normal 0 0 1\nouter loop\nvertex 0 0 0\n"
                                               "vertex 1 0 0\nvertex 0 1 0\nendloop\nendfacet\nbogus\nendsolid x\n")),
              Contains("line 9: expected 'facet' or 'endsolid', found 'bogus'"));
+  // Found by review of the check: exporters write 'nan' normals for degenerate facets (CGAL does
+  // not read normals), and what follows the last 'endsolid' (a DOS end-of-file byte) is ignored.
+  const std::string nan_normal = "solid t\nfacet normal -nan -nan -nan\nouter loop\nvertex 0 0 0\nvertex 0 0 0\n"
+                                 "vertex 1 0 0\nendloop\nendfacet\nfacet normal 0 0 1\nouter loop\nvertex 0 0 0\n"
+                                 "vertex 1 0 0\nvertex 0 1 0\nendloop\nendfacet\nendsolid t\n";
+  CHECK(meshsweeper::readMesh(dir.write("nan_normal.stl", nan_normal)).triangles.size() == 2);
+  CHECK(meshsweeper::readMesh(dir.write("ctrl_z.stl", nan_normal + "\x1a")).triangles.size() == 2);
+  CHECK(meshsweeper::readMesh(dir.write("trailing.stl", nan_normal + "written by hand\n")).triangles.size() == 2);
+  // A binary file whose header starts with 'solid ' and which has bytes past its triangles.
+  CHECK_THAT(readError(dir.write("solid_padded.stl", binaryStl("solid part", one, 1) + std::string(2, '\0'))),
+             Contains("nor a binary one: its header declares 1 triangle (134 bytes) but the file has 2 more bytes"));
   // One line per facet, no 'outer loop', two solids: valid.
   const Mesh flat = meshsweeper::readMesh(dir.write("flat.stl",
       "solid a\nfacet vertex 0 0 0 vertex 1 0 0 vertex 0 1 0 endfacet\nendsolid a\n"
