@@ -27,6 +27,7 @@ double secondsSince(std::chrono::steady_clock::time_point start) {
 
 struct VdbDistanceGrid::Impl {
   openvdb::FloatGrid::Ptr grid;
+  Vec3 origin = Vec3::Zero();  // the grid's frame: (x - origin) / voxel_size, voxels of 1
   double voxel_size = 0;
   double half_width = 0;
   bool signed_distance = false;
@@ -43,14 +44,22 @@ VdbDistanceGrid::VdbDistanceGrid(const Mesh& mesh, double voxel_size, double hal
   if (!problem.empty()) throw MeshError(problem);
   openvdb::initialize();
   const auto start = std::chrono::steady_clock::now();
+  // The grid is built in voxel units about the mesh's centre: OpenVDB's float vertices would
+  // not resolve a mesh far from the origin (a triangle at 1e12 left no voxel to compare), and
+  // its transform refuses voxels below about 1e-5 (a mesh of size 1e-3 failed; found by
+  // review). Distances are scaled back by the voxel size.
+  Vec3 lower, upper;
+  meshBounds(mesh, lower, upper);
+  impl_->origin = 0.5 * (lower + upper);
   std::vector<openvdb::Vec3s> points(mesh.positions.size());
-  for (size_t v = 0; v < points.size(); ++v)
-    points[v] = openvdb::Vec3s(static_cast<float>(mesh.positions[v].x()), static_cast<float>(mesh.positions[v].y()),
-                               static_cast<float>(mesh.positions[v].z()));
+  for (size_t v = 0; v < points.size(); ++v) {
+    const Vec3 x = (mesh.positions[v] - impl_->origin) / voxel_size;
+    points[v] = openvdb::Vec3s(static_cast<float>(x.x()), static_cast<float>(x.y()), static_cast<float>(x.z()));
+  }
   std::vector<openvdb::Vec3I> triangles(mesh.triangles.size());
   for (size_t t = 0; t < triangles.size(); ++t)
     triangles[t] = openvdb::Vec3I(mesh.triangles[t][0], mesh.triangles[t][1], mesh.triangles[t][2]);
-  const openvdb::math::Transform::Ptr transform = openvdb::math::Transform::createLinearTransform(voxel_size);
+  const openvdb::math::Transform::Ptr transform = openvdb::math::Transform::createLinearTransform(1.0);
   if (signed_distance) {
     impl_->grid = openvdb::tools::meshToLevelSet<openvdb::FloatGrid>(*transform, points, triangles,
                                                                      static_cast<float>(half_width));
@@ -69,7 +78,8 @@ VdbDistanceGrid::~VdbDistanceGrid() = default;
 
 bool VdbDistanceGrid::sample(const Vec3& p, double& value) const {
   const openvdb::FloatGrid& grid = *impl_->grid;
-  const openvdb::Vec3d index = grid.transform().worldToIndex(openvdb::Vec3d(p.x(), p.y(), p.z()));
+  const Vec3 x = (p - impl_->origin) / impl_->voxel_size;
+  const openvdb::Vec3d index = grid.transform().worldToIndex(openvdb::Vec3d(x.x(), x.y(), x.z()));
   const openvdb::Coord base(static_cast<int>(std::floor(index.x())), static_cast<int>(std::floor(index.y())),
                             static_cast<int>(std::floor(index.z())));
   openvdb::FloatGrid::ConstAccessor accessor = grid.getConstAccessor();
@@ -77,7 +87,7 @@ bool VdbDistanceGrid::sample(const Vec3& p, double& value) const {
     const openvdb::Coord c = base.offsetBy(corner & 1, (corner >> 1) & 1, (corner >> 2) & 1);
     if (!accessor.isValueOn(c)) return false;
   }
-  value = openvdb::tools::BoxSampler::sample(accessor, index);
+  value = openvdb::tools::BoxSampler::sample(accessor, index) * impl_->voxel_size;
   return true;
 }
 

@@ -5,6 +5,8 @@
 // compared with Meshsweeper's exact answers. An independent implementation, used in tests and
 // by `meshsweep check`; never used as an answer.
 //
+// The grid is built in voxel units about the mesh's centre, so a mesh far from the origin or
+// of any size in the supported range is resolved as well as one of size 1 at the origin.
 // What agreement to expect: OpenVDB stores distances at voxel centres (computed from float
 // copies of the vertices); a trilinear sample of a 1-Lipschitz field can err by up to the
 // distance to the farthest of the 8 voxel centres around it (sqrt(3) voxels), but near a

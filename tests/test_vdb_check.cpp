@@ -54,6 +54,31 @@ TEST_CASE("OpenVDB agrees with the exact distances on an icosphere", "[vdb]") {
   checkReport(vdbCheck(sphere, options), false);
 }
 
+// Found by review: OpenVDB's float vertices did not resolve a mesh far from the origin (no
+// point was compared, and the report read as perfect agreement), and its transform refused the
+// voxels of a mesh of size 1e-3. The grid is built in voxel units about the mesh's centre.
+TEST_CASE("OpenVDB cross-check far from the origin and at small and large sizes", "[vdb]") {
+  for (const auto& [scale, offset] : {std::pair{1.0, 1e12}, std::pair{1e-3, 0.0}, std::pair{1e-30, 1e-25},
+                                      std::pair{1e30, 1e32}}) {
+    INFO("scale " << scale << ", offset " << offset);
+    Mesh sphere = scenes::icosphere(3, 1.0);
+    for (Vec3& x : sphere.positions) x = scale * x + Vec3::Constant(offset);
+    VdbCheckOptions options;
+    options.voxel_size = 0.03 * scale;
+    options.points = 2000;
+    const VdbCheckReport r = vdbCheck(sphere, options);
+    INFO("compared " << r.compared << ", max " << r.max_error_voxels << ", sign " << r.sign_agreed << "/"
+                     << r.sign_compared << ", far " << r.sign_agreed_far << "/" << r.sign_compared_far);
+    CHECK(r.compared > r.requested * 9 / 10);
+    CHECK(r.max_error_voxels <= kMaxErrorVoxels);
+    CHECK(r.mean_error_voxels <= kMeanErrorVoxels);
+    // (At 1e12 a few sampled points are at exact distance 0, which has no sign to compare.)
+    CHECK(r.sign_compared > r.compared * 99 / 100);
+    CHECK(r.signAgreement() >= 0.95);
+    CHECK(r.sign_agreed_far == r.sign_compared_far);
+  }
+}
+
 TEST_CASE("OpenVDB agrees with the exact distances on armadillo", "[vdb]") {
   const std::string path = scenes::meshPath("armadillo");
   if (!std::filesystem::exists(path)) {

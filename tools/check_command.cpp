@@ -26,7 +26,7 @@ const char kCheckHelp[] =
     "disagreement |d_vdb| - d_exact in voxels, and (closed meshes) the sign agreement rate,\n"
     "overall and for points at least one voxel from the surface.\n"
     "\n"
-    "Exit status: 0 success, 1 unreadable/invalid mesh, 2 bad command line.\n";
+    "Exit status: 0 success, 1 unreadable/invalid mesh or no point compared, 2 bad command line.\n";
 
 int runCheck(int argc, char** argv, int first) {
   const Args args("check", argc, argv, first,
@@ -65,6 +65,12 @@ int runCheck(int argc, char** argv, int first) {
     std::printf("sign agreement: n/a (%s)\n", r.closed ? "--unsigned" : "open mesh: unsigned grid");
   }
   std::printf("exact seconds: %.3f\n", r.exact_seconds);
+  // Nothing compared is no agreement (found by review: it printed a perfect score).
+  if (r.compared == 0) {
+    std::fprintf(stderr, "meshsweep: check: %s: no point fell inside OpenVDB's narrow band: nothing was compared\n",
+                 mesh.name.c_str());
+    return kExitInput;
+  }
   return kExitOk;
 }
 
