@@ -28,7 +28,11 @@ class RigidBody {
   // Exact closest point to a world-space point; the result's point is in world space,
   // triangle and barycentric coordinates are the mesh's. `stream` must be on this body's
   // hierarchy. closestCoherent keeps the stream's coherence while body and point move
-  // (the point moves by its motion relative to the body).
+  // (the point moves by its motion relative to the body). The query runs at toBody(world): a
+  // point whose body-frame coordinates pass kMaxQueryCoordinate (1e153, core/types.h) is
+  // answered like any point out of range (NaN distance, no triangle), e.g. the world point 1e153
+  // with a translation of -1e150 (found by review). Points and translations within the
+  // service's range (1e150) never get there.
   ClosestPoint closest(QueryStream& stream, const Vec3& world) const;
   ClosestPoint closestCoherent(QueryStream& stream, const Vec3& world) const;
 
