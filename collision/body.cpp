@@ -247,6 +247,7 @@ PlacementOrientation BodyShape::placementOrientation(const Vec3* positions, bool
   const Mesh& m = mesh();
   if (!closed_ || m.triangles.empty()) return out;
   out.closed = true;
+  // About a vertex of the surface: the sum stays well conditioned wherever the body is placed.
   const Vec3 o = positions[m.triangles[0][0]];
   double magnitude = 0;
   for (const Triangle& t : m.triangles) {
@@ -268,13 +269,7 @@ PlacementOrientation BodyShape::placementOrientation(const Vec3* positions, bool
 }
 
 double BodyShape::orientationAt(const Vec3* positions) const {
-  const Mesh& m = mesh();
-  if (!closed_ || m.triangles.empty()) return orientation_;
-  // About a vertex of the surface: the sum stays well conditioned wherever the body is placed.
-  const double volume6 = enclosedVolume6(m, positions, positions[m.triangles[0][0]]);
-  if (volume6 > 0) return 1.0;
-  if (volume6 < 0) return -1.0;
-  return orientation_;
+  return placementOrientation(positions, false).orientation;
 }
 
 Vec3 BodyShape::pseudonormalAsGiven(TriangleIndex triangle, Feature feature, const Vec3* positions) const {

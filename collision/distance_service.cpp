@@ -105,12 +105,15 @@ struct Body {
   // key-framed or deforming closed body can be placed as a mirror image of its mesh. It is
   // recomputed (one pass over the faces) only when the references cannot vouch for it:
   // deforming, [0] at the anchor, whose vertices stay within the displacement bound of it;
-  // key-framed, [i] at frame i, its vertices moving at most orientation_reach[i] to frame i + 1.
+  // key-framed, [i] at frame i, its vertices moving at most its reach to frame i + 1.
   // A deforming body whose anchor cannot vouch for its whole bound also keeps the last placement
   // computed, valid while the vertices' drift since then (TreeGeometry::drift) allows.
+  struct OrientationRef {
+    PlacementOrientation placement;
+    double reach = 0;  // how far the vertices may move from it (straight paths)
+  };
   double orientation = 1;
-  std::vector<PlacementOrientation> orientation_refs;
-  std::vector<double> orientation_reach;
+  std::vector<OrientationRef> orientation_refs;
   PlacementOrientation orientation_last;
   double orientation_last_drift = -1;  // the drift at orientation_last (-1: none)
   uint64_t orientation_last_lineage = 0;  // and its lineage
@@ -267,14 +270,14 @@ struct DistanceService::Impl {
     size_t i = 0;
     if (b.keyframed && b.keyframed->frameCount() > 1)
       i = std::min(static_cast<size_t>(b.keyframed->time()), b.keyframed->frameCount() - 2);
-    if (i < b.orientation_refs.size() && b.orientation_refs[i].holdsWithin(b.orientation_reach[i]))
-      return b.orientation_refs[i].orientation;
+    if (i < b.orientation_refs.size() && b.orientation_refs[i].placement.holdsWithin(b.orientation_refs[i].reach))
+      return b.orientation_refs[i].placement.orientation;
     if (!b.deforming || b.orientation_refs.empty()) return b.shape->orientationAt(pos.data());
     // Within a lineage, every vertex moved at most the drift's growth since (hierarchy.h), and
     // every placement on the way lies within the bound of the anchor, whose grown area bounds
     // theirs: the last placement's volume alone is needed (a pass without square roots).
     const TreeGeometry& g = b.deforming->geometry();
-    const double area2 = b.orientation_refs[0].grownArea2(b.displacement_bound);
+    const double area2 = b.orientation_refs[0].placement.grownArea2(b.displacement_bound);
     if (!(b.orientation_last_drift >= 0 && b.orientation_last_lineage == g.lineage &&
           b.orientation_last.holdsWithin(g.drift - b.orientation_last_drift, area2))) {
       b.orientation_last = b.shape->placementOrientation(pos.data(), false);
@@ -287,25 +290,21 @@ struct DistanceService::Impl {
   // A deforming body anchored at `anchor` with its displacement bound.
   static void anchorOrientation(Body& b, const std::vector<Vec3>& anchor) {
     b.orientation_refs.clear();
-    b.orientation_reach.clear();
     b.orientation_last_drift = -1;
     if (!b.shape->closed()) return;
-    b.orientation_refs.push_back(b.shape->placementOrientation(anchor.data()));
-    b.orientation_reach.push_back(b.displacement_bound);
+    b.orientation_refs.push_back({b.shape->placementOrientation(anchor.data()), b.displacement_bound});
   }
 
   // A key-framed body's references, one per pair of frames (or the single frame).
   static void keyframeOrientations(Body& b) {
     b.orientation_refs.clear();
-    b.orientation_reach.clear();
     if (!b.shape->closed()) return;
     const std::vector<std::vector<Vec3>>& frames = b.keyframed->frames();
     for (size_t i = 0; i == 0 || i + 1 < frames.size(); ++i) {
-      b.orientation_refs.push_back(b.shape->placementOrientation(frames[i].data()));
       double reach = 0;
       if (i + 1 < frames.size())
         for (size_t v = 0; v < frames[i].size(); ++v) reach = std::max(reach, (frames[i + 1][v] - frames[i][v]).norm());
-      b.orientation_reach.push_back(reach);
+      b.orientation_refs.push_back({b.shape->placementOrientation(frames[i].data()), reach});
     }
   }
 
@@ -377,12 +376,13 @@ struct DistanceService::Impl {
   // a face is answered 1e-17 away at coordinates of 0.5, say, with a closest point one ulp
   // aside. A hit this close is on the surface: it counts as within any max_distance, and its
   // direction and sign come from its feature's pseudonormal, not from that offset.
+  static constexpr double kSurfaceRounding = 16 * std::numeric_limits<double>::epsilon();
   double surfaceRounding(uint32_t slot, const Vec3& p, const Vec3& q) const {
     const Body& b = bodies[slot];
     double scale = q.cwiseAbs().maxCoeff();
     if (b.kind == BodyKind::kRigid)
       scale += p.cwiseAbs().maxCoeff() + b.rigid->pose().translation().cwiseAbs().maxCoeff();
-    return 16 * std::numeric_limits<double>::epsilon() * scale;
+    return kSurfaceRounding * scale;
   }
 
   // The hit of a query point q (in the body's frame) on `face` of body `slot`: closest point
@@ -453,9 +453,10 @@ struct DistanceService::Impl {
         ++stats.invalid_points;
         continue;
       }
-      // Bodies within d, or within rounding of the point (surfaceRounding(): a point on a
-      // surface one ulp outside a key-framed or deforming body's exact box is still on it).
-      const double reach = std::max(d, 32 * std::numeric_limits<double>::epsilon() * p.cwiseAbs().maxCoeff());
+      // Bodies within d, or within rounding of the point (twice surfaceRounding() of a
+      // key-framed or deforming body, where q = p: a point on a surface one ulp outside such a
+      // body's exact box is still on it; a rigid body's box has its own margin).
+      const double reach = std::max(d, 2 * kSurfaceRounding * p.cwiseAbs().maxCoeff());
       s.candidate_count[j] = static_cast<uint32_t>(broadphase.candidates(p, reach, s.candidates.data() + j * slots));
       stats.pairs += s.candidate_count[j];
     }

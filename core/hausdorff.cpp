@@ -167,6 +167,20 @@ struct Cell {
                          // the coordinates' scale, so that it fits a float); 0 for a triangle
 };
 
+// Whether a cell is split as a segment (kThinFraction), along which edge (its corners edge,
+// edge + 1), and the children's thickness then (rounded up).
+struct ThinSplit {
+  bool thin = false;
+  int edge = 0;
+  float thickness = 0;  // relative, as Cell::thickness
+  double area = 0;      // the cell's (its segments have none)
+};
+
+// Mean and RMS integrals: area, integral of the distance and of its square.
+struct MeanSums {
+  double area = 0, sum = 0, sum2 = 0;
+};
+
 // Edge (two sample ids) -> midpoint sample id; open addressing, linear probing.
 class EdgeMap {
  public:
@@ -734,7 +748,7 @@ class Direction {
     ++counters_.rounds;
     if (batch_.empty()) return;
 
-    // Thin cells (splitThin): their longest edge, and how far the third corner is from it.
+    // Thin cells (thinCell): their longest edge, and how far the third corner is from it.
     thin_.resize(batch_.size());
     child_first_.resize(batch_.size() + 1);
     child_first_[0] = 0;
@@ -911,6 +925,8 @@ class Direction {
   std::vector<uint64_t> chunk_queries_;
   uint64_t rest_lineage_ = to_->restGeometry().lineage;
   std::vector<uint32_t> batch_, mids_, new_ids_, child_first_;  // per-round scratch
+  std::vector<ThinSplit> thin_;                                 // per-round scratch: [batch cell]
+  MeanSums thin_sums_;  // of the thin cells split as segments (their area and distances)
   std::vector<std::pair<uint64_t, uint32_t>> order_;
   Vec3 box_lower_ = Vec3::Zero(), box_extent_ = Vec3::Ones();  // A's bounds, for Morton codes
 
@@ -921,14 +937,7 @@ class Direction {
     return x.upper != y.upper ? x.upper < y.upper : x.cell > y.cell;
   }
 
-  // Whether a cell is split as a segment (kThinFraction), along which edge (its corners edge,
-  // edge + 1), and the children's thickness then (rounded up).
-  struct ThinSplit {
-    bool thin = false;
-    int edge = 0;
-    float thickness = 0;  // relative, as Cell::thickness
-    double area = 0;      // the cell's (its segments have none)
-  };
+  // Whether a cell is split as a segment (ThinSplit).
   ThinSplit thinCell(const Cell& cell, double tol) const {
     const Vec3 v[3] = {samples_[cell.corner[0]].position, samples_[cell.corner[1]].position,
                        samples_[cell.corner[2]].position};
@@ -942,17 +951,14 @@ class Direction {
       }
     }
     if (!(longest > 0)) return out;  // a point: split in four (it is final long before)
-    const Vec3& a = v[out.edge];
-    const Vec3 ab = v[(out.edge + 1) % 3] - a;
-    const Vec3 ac = v[(out.edge + 2) % 3] - a;
+    const Vec3 &a = v[out.edge], &b = v[(out.edge + 1) % 3], &c = v[(out.edge + 2) % 3];
+    const Vec3 ab = b - a, ac = c - a;
     // The third corner's distance to the edge (its foot lies on the edge: ab is the longest),
-    // rounded up: relative 1e-12, and eps of the coordinates for the differences.
+    // rounded up: relative 1e-12, and eps of the coordinates for the differences. A repeated
+    // corner (a segment cell's, or a degenerate triangle's) is on the edge exactly.
     const double t = std::clamp(ac.dot(ab) / ab.squaredNorm(), 0.0, 1.0);
-    const double coordinates = std::max({a.cwiseAbs().maxCoeff(), v[(out.edge + 1) % 3].cwiseAbs().maxCoeff(),
-                                         v[(out.edge + 2) % 3].cwiseAbs().maxCoeff()});
-    // A repeated corner (a segment cell's, or a degenerate triangle's) is on the edge exactly.
-    const Vec3& c = v[(out.edge + 2) % 3];
-    const double width = c == a || c == v[(out.edge + 1) % 3]
+    const double coordinates = std::max({a.cwiseAbs().maxCoeff(), b.cwiseAbs().maxCoeff(), c.cwiseAbs().maxCoeff()});
+    const double width = c == a || c == b
                              ? 0.0
                              : (ac - t * ab).norm() * (1 + 1e-12) + 8 * std::numeric_limits<double>::epsilon() * coordinates;
     const double thickness = absoluteThickness(cell.thickness) + width;
@@ -966,12 +972,7 @@ class Direction {
   double absoluteThickness(float relative) const {
     return relative > 0 ? static_cast<double>(relative) * scale_ * (1 + 1e-15) : 0.0;
   }
-  std::vector<ThinSplit> thin_;  // per-round scratch: [batch cell]
 
-  // Mean and RMS integrals: area, integral of the distance and of its square.
-  struct MeanSums {
-    double area = 0, sum = 0, sum2 = 0;
-  };
   // Adds a final cell (or a thin one split as segments) to `sums`.
   void addToMean(const Cell& cell, double cell_area, MeanSums& sums) const {
     const double d0 = samples_[cell.corner[0]].distance, d1 = samples_[cell.corner[1]].distance,
@@ -980,7 +981,6 @@ class Direction {
     sums.sum += cell_area * (d0 + d1 + d2) / 3;
     sums.sum2 += cell_area * (d0 * d0 + d1 * d1 + d2 * d2 + d0 * d1 + d1 * d2 + d2 * d0) / 6;
   }
-  MeanSums thin_sums_;  // of the thin cells split as segments
 
   void pushOrDrop(uint32_t c, double threshold) {
     if (cells_[c].upper > threshold) {

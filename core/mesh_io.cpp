@@ -286,10 +286,29 @@ OffHeader checkOffHeader(const std::string& path, std::istream& in, std::uint64_
   return header;
 }
 
+// A line longer than nextDataLine's max_line (line_number is the one before it).
+struct LineTooLong {};
+
+// std::getline, or, with a max_line, a read that stops there (a special file without line
+// breaks, /dev/zero, would grow one line without end).
+bool readLine(std::istream& in, std::string& line, std::size_t max_line) {
+  if (max_line == std::string::npos) return static_cast<bool>(std::getline(in, line));
+  std::streambuf& buffer = *in.rdbuf();
+  line.clear();
+  int c = buffer.sbumpc();
+  if (c == EOF) return false;
+  for (; c != EOF && c != '\n'; c = buffer.sbumpc()) {
+    if (line.size() == max_line) throw LineTooLong{};
+    line.push_back(static_cast<char>(c));
+  }
+  return true;
+}
+
 // Reads the next line that is not blank and not a whole-line comment, without its '#' comment.
-// Returns false at the end of the file.
-bool nextDataLine(std::istream& in, std::string& line, std::uint64_t& line_number) {
-  while (std::getline(in, line)) {
+// Returns false at the end of the file; throws LineTooLong past max_line characters.
+bool nextDataLine(std::istream& in, std::string& line, std::uint64_t& line_number,
+                  std::size_t max_line = std::string::npos) {
+  while (readLine(in, line, max_line)) {
     ++line_number;
     const std::size_t hash = line.find('#');
     if (hash != std::string::npos) line.resize(hash);
@@ -949,8 +968,8 @@ bool checkStl(const std::string& path, std::istream& in, std::uint64_t file_size
                      (header[first + 5] == ' ' || header[first + 5] == '\n' ||
                       header[first + 5] == '\r');
   const std::uint64_t triangles = got == kHeaderBytes ? littleEndian32(header + 80) : 0;
-  const bool binary_size = got == kHeaderBytes &&
-                           kHeaderBytes + kTriangleBytes * triangles == file_size;
+  const std::uint64_t needed = kHeaderBytes + kTriangleBytes * triangles;  // as binary
+  const bool binary_size = got == kHeaderBytes && needed == file_size;
   if (solid && !binary_size) {
     // ASCII: CGAL grows its arrays while it reads; the structure is checked here.
     in.clear();
@@ -959,7 +978,6 @@ bool checkStl(const std::string& path, std::istream& in, std::uint64_t file_size
     if (!problem.empty()) {
       // A binary file whose header starts with "solid " and whose size does not match its
       // count is taken for ASCII: say what it would be as binary too.
-      const std::uint64_t needed = kHeaderBytes + kTriangleBytes * triangles;
       if (got == kHeaderBytes && needed <= file_size && triangles > 0)
         fail(path, "not a valid ASCII STL (" + problem + "), nor a binary one: its header declares " +
                        plural(triangles, "triangle") + " (" + std::to_string(needed) + " bytes) but the file has " +
@@ -971,7 +989,6 @@ bool checkStl(const std::string& path, std::istream& in, std::uint64_t file_size
   if (got < kHeaderBytes)
     fail(path, "not an ASCII STL (no 'solid') and too short for a binary STL (" +
                    std::to_string(file_size) + " bytes; the binary header alone has 84)");
-  const std::uint64_t needed = kHeaderBytes + kTriangleBytes * triangles;
   if (needed > file_size)
     fail(path, "the binary STL header declares " + plural(triangles, "triangle") + ", which need " +
                    std::to_string(needed) + " bytes, but the file has " + std::to_string(file_size) +
@@ -1060,34 +1077,39 @@ Mesh readMesh(const std::string& path) {
     if (in.bad()) fail(path, "read error");
     for (char& c : text)
       if (isBlank(c) && c != '\r') c = ' ';
+    // Each statement of the text: f(first, end), its keyword's first character and its line's
+    // end (blanks are spaces by now).
+    auto statements = [&text](auto&& f) {
+      for (size_t at = 0; at < text.size();) {
+        const size_t end = std::min(text.find('\n', at), text.size());
+        size_t first = at;
+        while (first < end && text[first] == ' ') ++first;
+        f(first, end);
+        at = end + 1;
+      }
+    };
+    auto keyword = [&text](size_t first, size_t end, char c) {
+      return first < end && text[first] == c &&
+             ((first + 1 == end && end < text.size()) || text[first + 1] == ' ' || text[first + 1] == '\r');
+    };
     // Line elements ('l', polylines of an exporter's loose edges) are not faces, and CGAL's
     // reader refuses them: they become comments (line numbers kept).
-    for (size_t at = 0; at < text.size();) {
-      size_t first = at;
-      while (first < text.size() && text[first] == ' ') ++first;
-      if (first + 1 < text.size() && text[first] == 'l' && (text[first + 1] == ' ' || text[first + 1] == '\n' || text[first + 1] == '\r'))
-        text[first] = '#';
-      const size_t end = text.find('\n', at);
-      at = end == std::string::npos ? text.size() : end + 1;
-    }
+    statements([&](size_t first, size_t end) {
+      if (keyword(first, end, 'l')) text[first] = '#';
+    });
     const std::string problem = checkObjFaces(text);
     if (!problem.empty()) fail(path, problem);
     // Corners checked, each is cut to its vertex index: CGAL skips what follows the integer
     // with ignore(256, ' '), so a longer '/t/n' part was read on as further corners.
-    for (size_t at = 0; at < text.size();) {
-      const size_t end = std::min(text.find('\n', at), text.size());
-      size_t first = at;
-      while (first < end && text[first] == ' ') ++first;
-      if (first + 1 < end && text[first] == 'f' && text[first + 1] == ' ') {
-        bool in_suffix = false;
-        for (size_t i = first + 1; i < end; ++i) {
-          if (text[i] == ' ' || text[i] == '\r') in_suffix = false;
-          else if (text[i] == '/') in_suffix = true;
-          if (in_suffix) text[i] = ' ';
-        }
+    statements([&](size_t first, size_t end) {
+      if (!keyword(first, end, 'f')) return;
+      bool in_suffix = false;
+      for (size_t i = first + 1; i < end; ++i) {
+        if (text[i] == ' ' || text[i] == '\r') in_suffix = false;
+        else if (text[i] == '/') in_suffix = true;
+        if (in_suffix) text[i] = ' ';
       }
-      at = end + 1;
-    }
+    });
     obj_text.str(std::move(text));
   }
   std::istream& source = format == Format::kObj ? static_cast<std::istream&>(obj_text) : in;
@@ -1189,24 +1211,12 @@ std::vector<Vec3> readPoints(const std::string& path) {
   // Lines are read with a cap: a file without line breaks (/dev/zero) would grow one without
   // end (found by review).
   constexpr std::size_t kMaxLine = std::size_t(1) << 20;
-  auto nextLine = [&]() -> bool {
-    std::streambuf& buffer = *in.rdbuf();
-    while (true) {
-      line.clear();
-      int c = buffer.sbumpc();
-      if (c == EOF) return false;
-      ++line_number;
-      while (c != EOF && c != '\n') {
-        if (line.size() == kMaxLine)
-          throw MeshError(name + ":" + std::to_string(line_number) + ": line longer than " +
-                          std::to_string(kMaxLine) + " bytes (not a points file?)");
-        line.push_back(static_cast<char>(c));
-        c = buffer.sbumpc();
-      }
-      const std::size_t hash = line.find('#');
-      if (hash != std::string::npos) line.resize(hash);
-      if (!splitWords(line).empty()) return true;
-      if (c == EOF) return false;
+  auto nextLine = [&] {
+    try {
+      return nextDataLine(in, line, line_number, kMaxLine);
+    } catch (const LineTooLong&) {
+      throw MeshError(name + ":" + std::to_string(line_number + 1) + ": line longer than " +
+                      std::to_string(kMaxLine) + " bytes (not a points file?)");
     }
   };
   while (nextLine()) {

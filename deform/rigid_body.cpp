@@ -20,11 +20,12 @@ void RigidBody::setPose(const Eigen::Isometry3d& pose) {
   // 15,000 steps), and a scale or shear is no rigid pose. Up to 1e-9 the body is placed at the
   // rotation re-orthonormalised (through a normalised quaternion: pose() returns it), so that
   // answers stay exact for the pose the body has; beyond, the pose is refused.
-  if (!(r.transpose() * r).isIdentity(1e-9) || std::abs(r.determinant() - 1) > 1e-9)
+  const Eigen::Matrix3d gram = r.transpose() * r;
+  if (!gram.isIdentity(1e-9) || std::abs(r.determinant() - 1) > 1e-9)
     throw std::invalid_argument(
         "RigidBody: the pose's rotation is not orthonormal to 1e-9 (a rigid pose has no scale or shear)");
   pose_ = pose;
-  if (!(r.transpose() * r).isIdentity(1e-15))
+  if (!gram.isIdentity(1e-15))
     pose_.linear() = Eigen::Quaterniond(r).normalized().toRotationMatrix();
   inverse_ = pose_.inverse(Eigen::Isometry);
 }

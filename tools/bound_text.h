@@ -67,37 +67,54 @@ inline std::string exactText(double x) {
   return s.substr(0, end + 1) + s.substr(e);
 }
 
+// -1, 0 or 1 as a is below, equal to or above b.
+inline int compare(const Decimal& a, const Decimal& b) {
+  const bool a_negative = a.negative && !a.digits.empty(), b_negative = b.negative && !b.digits.empty();
+  if (a_negative != b_negative) return a_negative ? -1 : 1;
+  const int m = compareMagnitude(a, b);
+  return a_negative ? -m : m;
+}
+
+// The first text, of `print(y)` from y = start, on the outer side of x (up: at or above it),
+// each miss moved one `unit(text)` further out; x's exact expansion once in 8 misses (none
+// happen in practice: one or two attempts).
+template <class Print, class Unit>
+std::string outward(double x, bool up, long double start, Print print, Unit unit) {
+  const Decimal exact = parseDecimal(exactText(x).c_str());
+  long double y = start;
+  for (int attempt = 0; attempt < 8; ++attempt) {
+    const std::string text = print(y);
+    const int side = compare(parseDecimal(text.c_str()), exact);
+    if (up ? side >= 0 : side <= 0) return text;
+    const long double shown = std::strtold(text.c_str(), nullptr);
+    y = up ? shown + unit(text, shown) : shown - unit(text, shown);
+  }
+  return exactText(x);
+}
+
 }  // namespace detail
 
 // -1, 0 or 1 as the decimal `text` is below, equal to or above the finite double x, exactly.
 inline int compareDecimal(const std::string& text, double x) {
-  const detail::Decimal a = detail::parseDecimal(text.c_str());
-  const detail::Decimal b = detail::parseDecimal(detail::exactText(x).c_str());
-  const bool a_negative = a.negative && !a.digits.empty(), b_negative = b.negative && !b.digits.empty();
-  if (a_negative != b_negative) return a_negative ? -1 : 1;
-  const int m = detail::compareMagnitude(a, b);
-  return a_negative ? -m : m;
+  return detail::compare(detail::parseDecimal(text.c_str()), detail::parseDecimal(detail::exactText(x).c_str()));
 }
 
 // x with `digits` significant digits (1 to 17), rounded down (up = false) or up.
 inline std::string outwardBound(double x, int digits, bool up) {
   if (!std::isfinite(x)) return x > 0 ? "inf" : (x < 0 ? "-inf" : "nan");
-  const long double target = x;
-  char text[64];
-  long double y = target;
-  for (int attempt = 0; attempt < 8; ++attempt) {
+  auto print = [digits](long double y) {
+    char text[64];
     std::snprintf(text, sizeof text, "%.*Lg", digits, y);
-    const long double shown = std::strtold(text, nullptr);
-    const int side = compareDecimal(text, x);
-    if (up ? side >= 0 : side <= 0) return text;
-    // One unit of the last digit shown beyond the rounded value, in the needed direction; its
-    // place is read off the text (log10 of a power of ten can fall an ulp short of the integer,
-    // and a unit ten times too small never changed the text; found by review).
-    const long double unit = shown == 0 ? std::fabs(target)
-                                        : std::pow(10.0L, detail::parseDecimal(text).exponent - (digits - 1));
-    y = up ? shown + unit : shown - unit;
-  }
-  return detail::exactText(x);  // not reached in practice: x itself, exactly
+    return std::string(text);
+  };
+  // One unit of the last digit shown, its place read off the text (log10 of a power of ten can
+  // fall an ulp short of the integer, and a unit ten times too small never changed the text;
+  // found by review).
+  auto unit = [digits, x](const std::string& text, long double shown) {
+    return shown == 0 ? std::fabs(static_cast<long double>(x))
+                      : std::pow(10.0L, detail::parseDecimal(text.c_str()).exponent - (digits - 1));
+  };
+  return detail::outward(x, up, x, print, unit);
 }
 
 // x with `decimals` digits after the point (0 to 17), rounded down (up = false) or up: a bound
@@ -129,16 +146,14 @@ inline std::string outwardFixed(double x, int decimals, bool up) {
     }
     return digits;
   }
-  long double y = (up ? std::ceil(target * scale) : std::floor(target * scale)) / scale;
-  for (int attempt = 0; attempt < 8; ++attempt) {
-    std::snprintf(text, sizeof text, "%.*Lf", decimals, y);
-    // The scaling rounds: the text is checked, and moved one unit out if it fell inside.
-    const long double shown = std::strtold(text, nullptr);
-    const int side = compareDecimal(text, x);
-    if (up ? side >= 0 : side <= 0) return text;
-    y = up ? shown + 1 / scale : shown - 1 / scale;
-  }
-  return detail::exactText(x);  // not reached in practice: x itself, exactly
+  // The scaling rounds: the text is checked, and moved one unit out if it fell inside.
+  auto print = [decimals](long double y) {
+    char line[400];
+    std::snprintf(line, sizeof line, "%.*Lf", decimals, y);
+    return std::string(line);
+  };
+  auto unit = [scale](const std::string&, long double) { return 1 / scale; };
+  return detail::outward(x, up, (up ? std::ceil(target * scale) : std::floor(target * scale)) / scale, print, unit);
 }
 
 }  // namespace meshsweeper::cli
