@@ -1043,12 +1043,40 @@ std::string cgalRejected(Format format, const std::string& diagnosis) {
   return "malformed file";
 }
 
+// True when `in` starts with a UTF-8 byte order mark that `format` allows to drop: any text
+// format; an STL only when 'solid' follows and its size is not that of a binary STL (whose
+// 80-byte header may start with any bytes). Leaves `in` at the start.
+bool startsWithTextBom(std::istream& in, Format format, std::uint64_t file_size) {
+  unsigned char start[84] = {};
+  in.read(reinterpret_cast<char*>(start), sizeof start);
+  const std::uint64_t got = static_cast<std::uint64_t>(in.gcount());
+  in.clear();
+  in.seekg(0);
+  if (got < 3 || std::memcmp(start, "\xEF\xBB\xBF", 3) != 0) return false;
+  if (format != Format::kStl) return true;
+  if (got == sizeof start && 84 + 50 * std::uint64_t(littleEndian32(start + 80)) == file_size) return false;
+  std::uint64_t first = 3;
+  while (first < got && std::isspace(start[first])) ++first;
+  return got - first >= 5 && std::memcmp(start + first, "solid", 5) == 0;
+}
+
 }  // namespace
 
 Mesh readMesh(const std::string& path) {
-  std::ifstream in;
-  const std::uint64_t file_size = openInput(path, in);
+  std::ifstream file;
+  std::uint64_t file_size = openInput(path, file);
   const Format format = formatOf(path);
+  // A text file saved with a UTF-8 byte order mark (Windows editors write one) is read
+  // without it, from memory.
+  std::istringstream without_bom;
+  const bool bom = startsWithTextBom(file, format, file_size);
+  if (bom) {
+    file.seekg(3);
+    without_bom.str(std::string(std::istreambuf_iterator<char>(file), {}));
+    if (file.bad()) fail(path, "read error");
+    file_size -= 3;
+  }
+  std::istream& in = bom ? static_cast<std::istream&>(without_bom) : file;
 
   OffHeader off_header;
   switch (format) {

@@ -379,6 +379,38 @@ TEST_CASE("binary STL, also with a header that starts with 'solid'", "[mesh_io]"
   }
 }
 
+TEST_CASE("text files that start with a UTF-8 byte order mark read as without it", "[mesh_io]") {
+  TempDir dir;
+  const std::string bom = "\xEF\xBB\xBF";
+  const std::vector<Triangle> expected = {{0, 1, 2}, {0, 2, 3}};
+  const std::string files[][2] = {
+      {"square.off", "OFF\n4 1 0\n0 0 0\n1 0 0\n1 1 0\n0 1 0\n4 0 1 2 3\n"},
+      {"square.obj", "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nf 1 2 3 4\n"},
+      {"square.ply", "ply\nformat ascii 1.0\nelement vertex 4\nproperty float x\nproperty float y\n"
+                     "property float z\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n"
+                     "0 0 0\n1 0 0\n1 1 0\n0 1 0\n4 0 1 2 3\n"},
+      {"square.stl", "solid square\nfacet normal 0 0 1\nouter loop\nvertex 0 0 0\nvertex 1 0 0\nvertex 1 1 0\n"
+                     "endloop\nendfacet\nfacet normal 0 0 1\nouter loop\nvertex 0 0 0\nvertex 1 1 0\n"
+                     "vertex 0 1 0\nendloop\nendfacet\nendsolid square\n"}};
+  for (const auto& [name, text] : files) {
+    INFO(name);
+    const Mesh mesh = meshsweeper::readMesh(dir.write(name, bom + text));
+    CHECK(mesh.positions == kSquare);
+    CHECK(mesh.triangles == expected);
+    // The mark alone is an empty file of that format, and errors keep their line numbers.
+    CHECK_THAT(readError(dir.write(name, bom)), Catch::Contains(name));
+    CHECK(readError(dir.write(name, bom)) != "(no error)");
+  }
+  CHECK_THAT(readError(dir.write("bad.obj", bom + "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 4\n")),
+             Catch::Contains("line 4"));
+  // A binary STL whose header starts with the mark and 'solid' stays binary.
+  const std::vector<std::array<Vec3, 3>> triangles = {{kSquare[0], kSquare[1], kSquare[2]},
+                                                      {kSquare[0], kSquare[2], kSquare[3]}};
+  const Mesh binary = meshsweeper::readMesh(dir.write("binary.stl", binaryStl(bom + "solid binary", triangles, 2)));
+  CHECK(binary.positions == kSquare);
+  CHECK(binary.triangles == expected);
+}
+
 TEST_CASE("readMesh refuses missing, unreadable and unknown files with 'PATH: problem'",
           "[mesh_io]") {
   TempDir dir;
