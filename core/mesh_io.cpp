@@ -1233,6 +1233,14 @@ std::vector<Vec3> readPoints(const std::string& path) {
   }
   std::istream& in = from_stdin ? std::cin : file;
 
+  // A UTF-8 byte order mark (Windows editors write one) is dropped; a first line that starts
+  // with its first byte only is garbage either way.
+  if (in.peek() == 0xEF) {
+    char mark[3] = {};
+    in.read(mark, 3);
+    if (in.gcount() != 3 || std::memcmp(mark, "\xEF\xBB\xBF", 3) != 0)
+      throw MeshError(name + ":1: not a points file (starts with the byte 0xEF)");
+  }
   std::vector<Vec3> points;
   std::string line;
   std::uint64_t line_number = 0;

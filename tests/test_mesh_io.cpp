@@ -796,6 +796,11 @@ TEST_CASE("readPoints: one point a line, comments and blank lines ignored", "[me
   const std::vector<Vec3> expected = {{0, 0, 0}, {1.5, -2000, 3}, {0, 0.5, -0.25}, {7, 8, 9}};
   CHECK(points == expected);
   CHECK(meshsweeper::readPoints(dir.write("empty.txt", "")).empty());
+  // A UTF-8 byte order mark is dropped, before a comment too.
+  const std::vector<Vec3> one = {{1, 2, 3}};
+  CHECK(meshsweeper::readPoints(dir.write("bom.txt", "\xEF\xBB\xBF# points\n1 2 3\n")) == one);
+  CHECK(meshsweeper::readPoints(dir.write("bom2.txt", "\xEF\xBB\xBF" "1 2 3")) == one);
+  CHECK_THAT(pointsError(dir.write("ef.txt", "\xEF" "1 2 3\n")), Catch::Contains("ef.txt:1: not a points file"));
 }
 
 TEST_CASE("readPoints refuses malformed lines with 'PATH:LINE: problem'", "[mesh_io]") {
