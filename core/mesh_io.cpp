@@ -375,9 +375,15 @@ std::string checkOffBody(std::istream& in, const OffHeader& header) {
                plural(header.vertices, "vertex");
     }
   }
-  if (nextDataLine(in, line, line_number))
-    return "line " + std::to_string(line_number) + ": more data after the " +
-           plural(header.faces, "face") + " the header declares (a wrong face count?)";
+  if (nextDataLine(in, line, line_number)) {
+    // A DOS end-of-file byte (0x1A) as the file's last word is not data: old exporters wrote one.
+    const std::uint64_t extra_line = line_number;
+    const bool end_of_file_byte = line.find_first_not_of(" \t\r\v\f\x1a") == std::string::npos &&
+                                  std::count(line.begin(), line.end(), '\x1a') == 1;
+    if (!end_of_file_byte || nextDataLine(in, line, line_number))
+      return "line " + std::to_string(end_of_file_byte ? line_number : extra_line) + ": more data after the " +
+             plural(header.faces, "face") + " the header declares (a wrong face count?)";
+  }
   return {};
 }
 
@@ -862,7 +868,8 @@ void walkAsciiPly(const std::string& path, std::istream& in, const PlyHeader& he
       }
     }
   }
-  if (nextPlyWord(buffer, word))
+  // A DOS end-of-file byte (0x1A) as the file's last word is not data: old exporters wrote one.
+  if (nextPlyWord(buffer, word) && (word != "\x1a" || nextPlyWord(buffer, word)))
     fail(path, "more data (" + shown(word) + ") after the last element the header declares (wrong counts?)");
 }
 
@@ -1105,6 +1112,13 @@ Mesh readMesh(const std::string& path) {
     if (in.bad()) fail(path, "read error");
     for (char& c : text)
       if (isBlank(c) && c != '\r') c = ' ';
+    // A DOS end-of-file byte (0x1A) alone on the file's last line is not a statement: old
+    // exporters wrote one.
+    const size_t last = text.find_last_not_of(" \r\n");
+    if (last != std::string::npos && text[last] == '\x1a') {
+      const size_t before = last == 0 ? std::string::npos : text.find_last_not_of(' ', last - 1);
+      if (before == std::string::npos || text[before] == '\n') text[last] = ' ';
+    }
     // Each statement of the text: f(first, end), its keyword's first character and its line's
     // end (blanks are spaces by now).
     auto statements = [&text](auto&& f) {

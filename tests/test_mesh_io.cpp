@@ -679,6 +679,23 @@ TEST_CASE("readMesh refuses indices that are not integers, and data past the dec
   CHECK_THAT(readError(dir.write("tail.off", head + "3 0 1 2\nend\n")), Contains("line 7: more data after"));
   // Comments and blank lines after the faces are fine; so are per-face colours.
   CHECK(meshsweeper::readMesh(dir.write("ok.off", head + "3 0 1 2 255 0 0 # red\n\n# end\n")).triangles.size() == 1);
+  // So is a DOS end-of-file byte (0x1A) as the last word of a text file, in every text format;
+  // one followed by more data is refused.
+  const std::string ply_head = "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\n"
+                               "property float z\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n"
+                               "0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n";
+  for (const auto& [name, text] : {std::pair<std::string, std::string>{"eof.off", head + "3 0 1 2\n\x1a"},
+                                   {"eof.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n\x1a"},
+                                   {"eof.ply", ply_head + "\x1a"},
+                                   {"eof.stl", "solid t\nfacet normal 0 0 1\nouter loop\nvertex 0 0 0\nvertex 1 0 0\n"
+                                               "vertex 0 1 0\nendloop\nendfacet\nendsolid t\n\x1a"}}) {
+    INFO(name);
+    CHECK(meshsweeper::readMesh(dir.write(name, text)).triangles.size() == 1);
+  }
+  CHECK_THAT(readError(dir.write("eof2.off", head + "3 0 1 2\n\x1a\n3 0 1 2\n")), Contains("line 8: more data after"));
+  CHECK_THAT(readError(dir.write("eof3.off", head + "3 0 1 2\n\x1a\x1a")), Contains("line 7: more data after"));
+  CHECK_THAT(readError(dir.write("eof2.ply", ply_head + "\x1a 1")), Contains("more data"));
+  CHECK(readError(dir.write("eof2.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\x1a")) != "(no error)");
 
   const std::string verts = "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\n";
   for (const char* bad : {"f 1 2.5 3", "f 1 3abc 2", "f 1 2 3 x", "f 1/ 2 3", "f /1 2 3"}) {
