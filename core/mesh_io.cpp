@@ -253,7 +253,10 @@ OffHeader checkOffHeader(const std::string& path, std::istream& in, std::uint64_
     fail(path, "the OFF header has no vertex count");
   }
   if (!readOffCount(in, header.vertices)) fail(path, "the OFF header has no valid vertex count");
-  skipOffSpaceAndComments(in);
+  while (std::isspace(in.peek())) in.get();
+  if (in.peek() == '#')  // CGAL's reader fails there
+    fail(path, "the OFF header has a comment between its vertex and face counts (write the counts "
+               "on one line, the comment after them)");
   if (!readOffCount(in, header.faces)) fail(path, "the OFF header has no valid face count");
   // CGAL reads the edge count wherever it is, so a header without one swallows the first
   // coordinate; insist that it follows on the same line.

@@ -167,6 +167,15 @@ TEST_CASE("OFF header variants: counts on the keyword line, CRLF, COFF colours",
     CHECK(mesh.positions == kSquare);
     CHECK(mesh.triangles == expected);
   }
+  SECTION("comments: on the keyword line, own lines, after the counts; not between the counts") {
+    const std::string body = "0 0 0\n1 0 0\n1 1 0\n0 1 0\n4 0 1 2 3\n";
+    for (const std::string header : {"OFF # keyword\n4 1 0\n", "OFF\n# own line\n4 1 0 # counts\n", "OFF\n4\n1 0\n"}) {
+      INFO(header);
+      CHECK(meshsweeper::readMesh(dir.write("comment.off", header + body)).triangles == expected);
+    }
+    CHECK_THAT(readError(dir.write("between.off", "OFF\n4 # vertices\n1 0\n" + body)),
+               Contains("between.off: the OFF header has a comment between its vertex and face counts"));
+  }
   SECTION("upper-case extension") {
     const Mesh mesh =
         meshsweeper::readMesh(dir.write("UPPER.OFF", "OFF\n3 1 0\n0 0 0\n1 0 0\n1 1 0\n3 0 1 2\n"));
