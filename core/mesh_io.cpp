@@ -1053,21 +1053,35 @@ std::string cgalRejected(Format format, const std::string& diagnosis) {
   return "malformed file";
 }
 
-// True when `in` starts with a UTF-8 byte order mark that `format` allows to drop: any text
-// format; an STL only when 'solid' follows and its size is not that of a binary STL (whose
-// 80-byte header may start with any bytes). Leaves `in` at the start.
-bool startsWithTextBom(std::istream& in, Format format, std::uint64_t file_size) {
-  unsigned char start[84] = {};
-  in.read(reinterpret_cast<char*>(start), sizeof start);
-  const std::uint64_t got = static_cast<std::uint64_t>(in.gcount());
+// What a text file needs before it is read: a UTF-8 byte order mark to drop (Windows editors
+// write one), lines ended by CR alone to end with LF (classic Mac OS: the readers split lines on
+// LF only). A binary STL (by its size; its 80-byte header may hold any bytes) needs neither, and
+// an STL is text only when 'solid' starts it. Leaves `in` at the start.
+struct TextRepair {
+  bool bom = false;
+  bool cr_only = false;
+};
+TextRepair textRepair(const std::string& path, std::istream& in, Format format, std::uint64_t file_size) {
+  constexpr std::size_t kLook = 1 << 16;  // a text file has a line break by then
+  std::string start(kLook, '\0');
+  in.read(start.data(), kLook);
+  start.resize(static_cast<std::size_t>(in.gcount()));
   in.clear();
   in.seekg(0);
-  if (got < 3 || std::memcmp(start, "\xEF\xBB\xBF", 3) != 0) return false;
-  if (format != Format::kStl) return true;
-  if (got == sizeof start && 84 + 50 * std::uint64_t(littleEndian32(start + 80)) == file_size) return false;
-  std::uint64_t first = 3;
-  while (first < got && std::isspace(start[first])) ++first;
-  return got - first >= 5 && std::memcmp(start + first, "solid", 5) == 0;
+  TextRepair repair;
+  if (format == Format::kStl) {
+    if (start.size() >= 84 &&
+        84 + 50 * std::uint64_t(littleEndian32(reinterpret_cast<const unsigned char*>(start.data()) + 80)) == file_size)
+      return repair;
+    const std::size_t first = start.find_first_not_of(" \t\r\n\v\f", start.compare(0, 3, "\xEF\xBB\xBF") == 0 ? 3 : 0);
+    if (first == std::string::npos || start.compare(first, 5, "solid") != 0) return repair;
+  }
+  repair.bom = start.compare(0, 3, "\xEF\xBB\xBF") == 0;
+  repair.cr_only = start.find('\r') != std::string::npos && start.find('\n') == std::string::npos;
+  // A PLY's body may be binary, where a CR is data.
+  if (repair.cr_only && format == Format::kPly)
+    fail(path, "its lines end in CR alone (classic Mac OS): convert them to LF or CRLF");
+  return repair;
 }
 
 }  // namespace
@@ -1076,17 +1090,18 @@ Mesh readMesh(const std::string& path) {
   std::ifstream file;
   std::uint64_t file_size = openInput(path, file);
   const Format format = formatOf(path);
-  // A text file saved with a UTF-8 byte order mark (Windows editors write one) is read
-  // without it, from memory.
-  std::istringstream without_bom;
-  const bool bom = startsWithTextBom(file, format, file_size);
-  if (bom) {
-    file.seekg(3);
-    without_bom.str(std::string(std::istreambuf_iterator<char>(file), {}));
+  // A text file with a byte order mark or CR line ends is repaired in memory (textRepair).
+  std::istringstream repaired;
+  const TextRepair repair = textRepair(path, file, format, file_size);
+  if (repair.bom || repair.cr_only) {
+    file.seekg(repair.bom ? 3 : 0);
+    std::string text(std::istreambuf_iterator<char>(file), {});
     if (file.bad()) fail(path, "read error");
-    file_size -= 3;
+    if (repair.cr_only) std::replace(text.begin(), text.end(), '\r', '\n');
+    file_size = text.size();
+    repaired.str(std::move(text));
   }
-  std::istream& in = bom ? static_cast<std::istream&>(without_bom) : file;
+  std::istream& in = repair.bom || repair.cr_only ? static_cast<std::istream&>(repaired) : file;
 
   OffHeader off_header;
   switch (format) {

@@ -388,7 +388,7 @@ TEST_CASE("binary STL, also with a header that starts with 'solid'", "[mesh_io]"
   }
 }
 
-TEST_CASE("text files that start with a UTF-8 byte order mark read as without it", "[mesh_io]") {
+TEST_CASE("text files with a UTF-8 byte order mark or CR line ends read as without them", "[mesh_io]") {
   TempDir dir;
   const std::string bom = "\xEF\xBB\xBF";
   const std::vector<Triangle> expected = {{0, 1, 2}, {0, 2, 3}};
@@ -412,6 +412,24 @@ TEST_CASE("text files that start with a UTF-8 byte order mark read as without it
   }
   CHECK_THAT(readError(dir.write("bad.obj", bom + "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 4\n")),
              Catch::Contains("line 4"));
+  // Lines ended by CR alone (classic Mac OS) read as LF lines, with or without the mark; a PLY
+  // (whose body may be binary, where a CR is data) is refused by name.
+  for (const auto& [name, text] : files) {
+    std::string cr = text;
+    std::replace(cr.begin(), cr.end(), '\n', '\r');
+    for (const std::string& mark : {std::string(), bom}) {
+      INFO(name << (mark.empty() ? "" : " with the mark"));
+      if (name == "square.ply") {
+        CHECK_THAT(readError(dir.write(name, mark + cr)), Catch::Contains("its lines end in CR alone"));
+        continue;
+      }
+      const Mesh mesh = meshsweeper::readMesh(dir.write(name, mark + cr));
+      CHECK(mesh.positions == kSquare);
+      CHECK(mesh.triangles == expected);
+    }
+  }
+  CHECK_THAT(readError(dir.write("bad.off", "OFF\r3 1 0\r0 0 0\r1 0 0\r0 1 0\r3 0 1 3\r")),
+             Catch::Contains("line 6: face 0 uses vertex 3"));
   // A binary STL whose header starts with the mark and 'solid' stays binary.
   const std::vector<std::array<Vec3, 3>> triangles = {{kSquare[0], kSquare[1], kSquare[2]},
                                                       {kSquare[0], kSquare[2], kSquare[3]}};
