@@ -87,6 +87,10 @@ struct HierarchyStats {
   uint32_t contractions = 0;
   uint32_t base_triangles = 0;  // triangles left in the base mesh (roots of the cover tree)
   uint32_t depth = 0;           // levels of 8-wide nodes
+  // Triangles the contraction checks visited to find the adopters of deleted triangles: a
+  // small multiple of the triangles times the rounds (a vertex of high degree once made it
+  // quadratic).
+  uint64_t adopter_visits = 0;
   size_t fixed_bytes = 0;       // memory of the fixed tables (nodes, leaves, mesh copy)
 };
 

@@ -152,9 +152,9 @@ class Contractor {
       return true;
     });
   }
-  template <class ForEachV, class ForEachU>
-  bool findDeletions(VertexIndex v, VertexIndex u, ForEachV&& for_each_v, ForEachU&& for_each_u,
-                     std::vector<Deletion>& deletions);
+  template <class ForEachV, class ForEachIn, class StarSize>
+  bool findDeletions(VertexIndex v, VertexIndex u, ForEachV&& for_each_v, ForEachIn&& for_each_in,
+                     StarSize&& star_size, std::vector<Deletion>& deletions);
   // v -> u on the current mesh, with v's star from gatherStar().
   bool findDeletions(VertexIndex v, VertexIndex u, const std::vector<uint32_t>& v_star,
                      std::vector<Deletion>& deletions) {
@@ -164,17 +164,18 @@ class Contractor {
           for (uint32_t c : v_star)
             if (!f(c / 3)) return;
         },
-        [&](auto&& f) { forEachCorner(u, [&](uint32_t c) { return f(c / 3); }); }, deletions);
+        [&](VertexIndex x, auto&& f) { forEachCorner(x, [&](uint32_t c) { return f(c / 3); }); },
+        [&](VertexIndex x) { return live_corners_[x]; }, deletions);
   }
   // Whether v -> u is legal on the mesh of the round's start (stars from buildStars()).
   bool legalAtRoundStart(VertexIndex v, VertexIndex u) {
-    auto star = [&](VertexIndex x) {
-      return [this, x](auto&& f) {
-        for (uint32_t i = star_begin_[x]; i < star_begin_[x + 1]; ++i)
-          if (!f(star_slot_[i])) return;
-      };
+    auto for_each_in = [this](VertexIndex x, auto&& f) {
+      for (uint32_t i = star_begin_[x]; i < star_begin_[x + 1]; ++i)
+        if (!f(star_slot_[i])) return;
     };
-    return findDeletions(v, u, star(v), star(u), deletions_);
+    return findDeletions(
+        v, u, [&](auto&& f) { for_each_in(v, f); }, for_each_in,
+        [this](VertexIndex x) { return star_begin_[x + 1] - star_begin_[x]; }, deletions_);
   }
   void buildStars();
   void apply(VertexIndex v, VertexIndex u, const std::vector<uint32_t>& v_star,
@@ -225,20 +226,23 @@ class Contractor {
   std::vector<uint8_t> listed_;       // [slot] in deletions_ (findDeletions; cleared after)
   std::vector<uint32_t> third_group_; // [vertex] a deletion with that third corner (findDeletions)
   size_t live_triangles_ = 0;
+  uint64_t adopter_visits_ = 0;  // HierarchyStats::adopter_visits
 };
 
 // Lists the triangles v -> u deletes (those holding both) with their adopters: for a deleted
-// (v, u, a), the first triangle in u's star that does not hold v and holds a, else the first in
-// v's star that does not hold u and holds a. Returns false when some deleted triangle leaves
-// edge (u, a) in no surviving triangle. for_each_v(f) / for_each_u(f) call f(slot) for the
-// live triangles of v / u, in list order.
-// Linear in the two stars (many triangles on one edge, or copies of one triangle, made it
-// quadratic): deletions are listed with a per-slot mark, and those with the same third corner
-// share their adopter, found through a per-vertex group index; the walks stop once every
-// deletion has one.
-template <class ForEachV, class ForEachU>
-bool Contractor::findDeletions(VertexIndex v, VertexIndex u, ForEachV&& for_each_v, ForEachU&& for_each_u,
-                               std::vector<Deletion>& deletions) {
+// (v, u, a), a triangle that holds u and a but not v (found in u's star, or in a's when the
+// third corners' stars are smaller together: the first in list order), else the first in v's
+// star that does not hold u and holds a (it becomes (u, a, .)). Returns false when some
+// deleted triangle leaves edge (u, a) in no surviving triangle. for_each_v(f) calls f(slot) for
+// the live triangles of v, for_each_in(x, f) those of any vertex x, in list order, until f
+// returns false; star_size(x) counts them.
+// Linear in v's star plus the smaller of u's star and the third corners' (many triangles on one
+// edge, copies of one triangle, or a vertex of high degree as u made it quadratic): deletions
+// are listed with a per-slot mark, and those with the same third corner share their adopter,
+// found through a per-vertex group index.
+template <class ForEachV, class ForEachIn, class StarSize>
+bool Contractor::findDeletions(VertexIndex v, VertexIndex u, ForEachV&& for_each_v, ForEachIn&& for_each_in,
+                               StarSize&& star_size, std::vector<Deletion>& deletions) {
   deletions.clear();
   for_each_v([&](uint32_t slot) {
     if (holds(slot, u) && !listed_[slot]) {
@@ -250,15 +254,20 @@ bool Contractor::findDeletions(VertexIndex v, VertexIndex u, ForEachV&& for_each
   if (deletions.empty()) return true;
   // One group per distinct third corner: the group's first deletion carries the adopter.
   size_t missing = 0;
+  const size_t u_star = star_size(u);
+  size_t thirds_star = 0;
   for (size_t i = 0; i < deletions.size(); ++i) {
     listed_[deletions[i].slot] = 0;
     uint32_t& group = third_group_[deletions[i].third];
     if (group == kNone) {
       group = static_cast<uint32_t>(i);
       ++missing;
+      if (thirds_star < u_star) thirds_star += star_size(deletions[i].third);
     }
   }
+  // A surviving triangle on edge (u, a) lies in both stars: walk the smaller side.
   auto adoptFrom = [&](uint32_t slot, VertexIndex other) {
+    ++adopter_visits_;
     if (holds(slot, other)) return missing > 0;
     for (int k = 0; k < 3; ++k) {
       const uint32_t group = third_group_[tri_[3 * slot + k]];
@@ -269,7 +278,21 @@ bool Contractor::findDeletions(VertexIndex v, VertexIndex u, ForEachV&& for_each
     }
     return missing > 0;
   };
-  for_each_u([&](uint32_t slot) { return adoptFrom(slot, v); });
+  if (thirds_star < u_star) {
+    for (size_t i = 0; i < deletions.size(); ++i) {
+      const VertexIndex a = deletions[i].third;
+      if (third_group_[a] != i) continue;
+      for_each_in(a, [&](uint32_t slot) {
+        ++adopter_visits_;
+        if (holds(slot, v) || !holds(slot, u)) return true;
+        deletions[i].adopter = slot;
+        --missing;
+        return false;
+      });
+    }
+  } else {
+    for_each_in(u, [&](uint32_t slot) { return adoptFrom(slot, v); });
+  }
   if (missing > 0) for_each_v([&](uint32_t slot) { return adoptFrom(slot, u); });
   for (Deletion& d : deletions) {
     const uint32_t group = third_group_[d.third];
@@ -539,6 +562,7 @@ void Contractor::run(CoverTree& tree, std::vector<VertexIndex>& contracted_into,
   for (size_t v = 0; v < n; ++v)
     if (into_[v] != kNone) contracted_into[original_[v]] = original_[into_[v]];
   stats.base_triangles = static_cast<uint32_t>(live_triangles_);
+  stats.adopter_visits = adopter_visits_;
 }
 
 }  // namespace

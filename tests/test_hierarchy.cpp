@@ -386,6 +386,8 @@ void checkHierarchy(const Mesh& mesh, uint64_t seed) {
   // The copy kept by the hierarchy is the input.
   REQUIRE(h->mesh().triangles == mesh.triangles);
   REQUIRE(h->mesh().positions == mesh.positions);
+  // The contraction's checks stay linear in the mesh per round.
+  CHECK(h->stats().adopter_visits <= 32 * (mesh.triangles.size() + 1) * std::max<uint32_t>(h->stats().rounds, 1));
 
   // (a)
   CHECK(validate(*h) == "");
@@ -590,10 +592,24 @@ TEST_CASE("hierarchy: many triangles on one edge or one triangle build and answe
   fan.name = "fan";
   fan.positions = {Vec3(0, 0, 0), Vec3(1, 0, 0), Vec3(1, 1, 0), Vec3(0, 1, 0.2)};
   for (uint32_t k = 1; k + 1 < kCount; ++k) fan.triangles.push_back(Triangle{0, k % 4, (k + 1) % 4});
-  for (const Mesh* mesh : {&copies, &book, &fan}) {
+  // A vertex of high degree whose rim vertices are nearer to it than to each other (a gear:
+  // rim radii 1 and 3 in turn), so each rim vertex is contracted into it: finding the adopters
+  // of the two triangles each contraction deletes walked the hub's whole star (found by review:
+  // 200,000 rim vertices took 54 s to build).
+  Mesh sun;
+  sun.name = "sun";
+  sun.positions = {Vec3(0, 0, 0)};
+  for (uint32_t i = 0; i < kCount; ++i) {
+    const double angle = 2 * kPi * i / kCount, r = i % 2 ? 3 : 1;
+    sun.positions.push_back(Vec3(r * std::cos(angle), r * std::sin(angle), 0));
+    sun.triangles.push_back(Triangle{0, 1 + i, 1 + (i + 1) % kCount});
+  }
+  for (const Mesh* mesh : {&copies, &book, &fan, &sun}) {
     INFO(mesh->name);
     const auto h = Hierarchy::build(*mesh);
     CHECK(validate(*h) == "");
+    // The contraction's work stays linear in the mesh per round.
+    CHECK(h->stats().adopter_visits <= 32 * mesh->triangles.size() * h->stats().rounds);
     QueryStream stream(h);
     for (const Vec3& p : {Vec3(0.3, 0.2, 0.5), Vec3(-1, 2, 3), Vec3(0.5, 0.5, 0.5), Vec3(0, 0, 0.4)}) {
       const ClosestPoint c = stream.closest(p);
