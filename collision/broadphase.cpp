@@ -34,33 +34,67 @@ bool boxWithin(const Box3& box, const Vec3& p, double distance) {
   return d2 <= squaredLimit(distance);
 }
 
+constexpr uint32_t kNoPosition = std::numeric_limits<uint32_t>::max();
+
 void Broadphase::resize(size_t slots) {
-  slots_ = slots;
-  const size_t padded = (slots + 3) / 4 * 4;
+  for (size_t slot = slots; slot < dense_of_.size(); ++slot) set(slot, Box3{});
+  dense_of_.resize(slots, kNoPosition);
+}
+
+void Broadphase::pad() {
+  const size_t live = slot_of_.size(), padded = (live + 3) / 4 * 4;
   for (int axis = 0; axis < 3; ++axis) {
-    lower_[axis].resize(padded, kInf);
-    upper_[axis].resize(padded, -kInf);
-    for (size_t s = slots; s < padded; ++s) {
-      lower_[axis][s] = kInf;
-      upper_[axis][s] = -kInf;
+    lower_[axis].resize(padded);
+    upper_[axis].resize(padded);
+    for (size_t k = live; k < padded; ++k) {
+      lower_[axis][k] = kInf;
+      upper_[axis][k] = -kInf;
     }
   }
 }
 
 void Broadphase::set(size_t slot, const Box3& box) {
-  assert(slot < slots_);
-  const bool empty = box.empty();
+  assert(slot < dense_of_.size());
+  uint32_t at = dense_of_[slot];
+  if (box.empty()) {
+    if (at == kNoPosition) return;
+    // Out of the loop: the later slots move down one position.
+    for (int axis = 0; axis < 3; ++axis) {
+      lower_[axis].erase(lower_[axis].begin() + at);
+      upper_[axis].erase(upper_[axis].begin() + at);
+    }
+    slot_of_.erase(slot_of_.begin() + at);
+    for (size_t k = at; k < slot_of_.size(); ++k) dense_of_[slot_of_[k]] = static_cast<uint32_t>(k);
+    dense_of_[slot] = kNoPosition;
+    pad();
+    return;
+  }
+  if (at == kNoPosition) {
+    // Into the loop at its slot's place: the later slots move up one position.
+    at = static_cast<uint32_t>(std::lower_bound(slot_of_.begin(), slot_of_.end(), static_cast<uint32_t>(slot)) -
+                               slot_of_.begin());
+    for (int axis = 0; axis < 3; ++axis) {
+      lower_[axis].resize(slot_of_.size());
+      upper_[axis].resize(slot_of_.size());
+      lower_[axis].insert(lower_[axis].begin() + at, 0.0);
+      upper_[axis].insert(upper_[axis].begin() + at, 0.0);
+    }
+    slot_of_.insert(slot_of_.begin() + at, static_cast<uint32_t>(slot));
+    for (size_t k = at; k < slot_of_.size(); ++k) dense_of_[slot_of_[k]] = static_cast<uint32_t>(k);
+    pad();
+  }
   for (int axis = 0; axis < 3; ++axis) {
-    lower_[axis][slot] = empty ? kInf : box.lower[axis];
-    upper_[axis][slot] = empty ? -kInf : box.upper[axis];
+    lower_[axis][at] = box.lower[axis];
+    upper_[axis][at] = box.upper[axis];
   }
 }
 
 Box3 Broadphase::box(size_t slot) const {
   Box3 b;
+  const uint32_t at = dense_of_[slot];
   for (int axis = 0; axis < 3; ++axis) {
-    b.lower[axis] = lower_[axis][slot];
-    b.upper[axis] = upper_[axis][slot];
+    b.lower[axis] = at == kNoPosition ? kInf : lower_[axis][at];
+    b.upper[axis] = at == kNoPosition ? -kInf : upper_[axis][at];
   }
   return b;
 }
@@ -74,12 +108,14 @@ size_t Broadphase::candidates(const Vec3& p, double distance, uint32_t* out) con
   const double* ux = upper_[0].data();
   const double* uy = upper_[1].data();
   const double* uz = upper_[2].data();
+  const uint32_t* slot_of = slot_of_.data();
+  const size_t live = slot_of_.size();
   size_t n = 0;
 #if defined(__AVX__)
-  // Four boxes at a time; padding slots are empty (+inf gaps) and never pass.
+  // Four boxes at a time; padding positions are empty (+inf gaps) and never pass.
   const __m256d qx = _mm256_set1_pd(px), qy = _mm256_set1_pd(py), qz = _mm256_set1_pd(pz);
   const __m256d zero = _mm256_setzero_pd(), bound = _mm256_set1_pd(limit);
-  for (size_t s = 0; s < slots_; s += 4) {
+  for (size_t s = 0; s < live; s += 4) {
     const __m256d gx = _mm256_max_pd(_mm256_max_pd(_mm256_sub_pd(_mm256_loadu_pd(lx + s), qx),
                                                    _mm256_sub_pd(qx, _mm256_loadu_pd(ux + s))), zero);
     const __m256d gy = _mm256_max_pd(_mm256_max_pd(_mm256_sub_pd(_mm256_loadu_pd(ly + s), qy),
@@ -89,16 +125,16 @@ size_t Broadphase::candidates(const Vec3& p, double distance, uint32_t* out) con
     const __m256d d2 = _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(gx, gx), _mm256_mul_pd(gy, gy)), _mm256_mul_pd(gz, gz));
     unsigned mask = static_cast<unsigned>(_mm256_movemask_pd(_mm256_cmp_pd(d2, bound, _CMP_LE_OQ)));
     while (mask) {
-      out[n++] = static_cast<uint32_t>(s + static_cast<size_t>(__builtin_ctz(mask)));
+      out[n++] = slot_of[s + static_cast<size_t>(__builtin_ctz(mask))];
       mask &= mask - 1;
     }
   }
 #else
-  for (size_t s = 0; s < slots_; ++s) {
+  for (size_t s = 0; s < live; ++s) {
     const double gx = std::max(std::max(lx[s] - px, px - ux[s]), 0.0);
     const double gy = std::max(std::max(ly[s] - py, py - uy[s]), 0.0);
     const double gz = std::max(std::max(lz[s] - pz, pz - uz[s]), 0.0);
-    out[n] = static_cast<uint32_t>(s);
+    out[n] = slot_of[s];
     n += (gx * gx + gy * gy + gz * gz <= limit) ? 1 : 0;
   }
 #endif

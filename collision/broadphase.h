@@ -13,7 +13,9 @@
 // both are ~30-37 ns. Every step queries each point against its candidates at ~0.3-1 us per
 // pair, so the broadphase is 1-2% of a step. The flat loop has no build cost (bodies move every
 // step), no cell-size parameter, and its cost does not depend on where points fall; a grid or
-// a tree over the bodies pays off only beyond ~64 bodies.
+// a tree over the bodies pays off only beyond ~64 bodies. Only the slots with a box are in the
+// loop (kept in slot order, so a slot switched on or off costs a move of the others): a world
+// that once held many bodies and now holds few costs what the few cost.
 // BroadphaseReference answers the same question box by box (array of structures, scalar) for
 // the tests.
 #include "core/types.h"
@@ -35,7 +37,9 @@ class Broadphase {
  public:
   // Sets the number of slots (bodies, by slot index); new slots are empty.
   void resize(size_t slots);
-  size_t size() const { return slots_; }
+  size_t size() const { return dense_of_.size(); }
+  // Slots with a box (non-empty).
+  size_t liveCount() const { return slot_of_.size(); }
   // Sets slot `slot`'s world box (an empty box to switch the slot off). Precondition:
   // slot < size(); box coordinates are not NaN.
   void set(size_t slot, const Box3& box);
@@ -43,12 +47,14 @@ class Broadphase {
 
   // Writes to out[0..n) the slots whose box is within distance `distance` of p, by increasing
   // slot, and returns n. distance may be +infinity (every non-empty slot). out must hold
-  // size() entries. Preconditions: p finite; distance >= 0.
+  // liveCount() entries. Preconditions: p finite; distance >= 0.
   size_t candidates(const Vec3& p, double distance, uint32_t* out) const;
 
  private:
-  size_t slots_ = 0;
-  // [axis][slot] padded to a multiple of 4; empty slots hold lower = +inf, upper = -inf.
+  void pad();
+  std::vector<uint32_t> dense_of_;  // [slot] position in the arrays below, or UINT32_MAX (empty)
+  std::vector<uint32_t> slot_of_;   // [position] slot, increasing
+  // [axis][position] padded to a multiple of 4 with empty boxes (lower = +inf, upper = -inf).
   std::vector<double> lower_[3], upper_[3];
 };
 

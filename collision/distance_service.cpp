@@ -150,8 +150,9 @@ struct BestHit {
 struct Scratch {
   std::vector<StreamSlot> streams;      // [slot]
   std::vector<BestHit> best;            // [local point] closest hit of a block's point
-  std::vector<uint32_t> candidates;     // [local point * slots + k]
-  std::vector<uint32_t> candidate_count;  // [local point]
+  std::vector<uint32_t> found;          // one point's broadphase answer
+  std::vector<uint32_t> candidates;     // a block's candidate slots, point after point
+  std::vector<uint32_t> candidate_begin;  // [local point + 1] CSR into candidates
   std::vector<uint32_t> begin;          // rebuilt CSR of a block
   std::vector<PairState> pairs;
   std::vector<TriangleHit> triangle_hits;
@@ -183,6 +184,7 @@ struct DistanceService::Impl {
   Broadphase broadphase;
   std::map<const Mesh*, MeshCacheEntry> mesh_cache;
   std::unordered_map<const Hierarchy*, std::weak_ptr<const BodyShape>> shapes;
+  size_t shapes_swept = 0;  // entries left by the last sweep of expired shapes
   std::vector<BlockStates> blocks;                 // [block] closest-mode pair states
   std::vector<StepStats> block_stats;              // [block]
   std::vector<std::vector<DistanceHit>> block_hits;  // [block] within mode
@@ -227,22 +229,10 @@ struct DistanceService::Impl {
     return update;
   }
 
-  // Drops every pair state of body `slot` (it was removed).
-  void dropStates(uint32_t slot) {
-    for (BlockStates& b : blocks) {
-      uint32_t kept = 0;
-      for (uint32_t j = 0; j < b.points; ++j) {
-        const uint32_t first = b.begin[j], last = b.begin[j + 1];
-        b.begin[j] = kept;
-        for (uint32_t k = first; k < last; ++k)
-          if (b.pairs[k].slot != slot) b.pairs[kept++] = b.pairs[k];
-      }
-      if (b.points > 0) b.begin[b.points] = kept;
-      if (kept == b.pairs.size()) continue;
-      b.pairs.resize(kept);
-      b.pairs.shrink_to_fit();  // removing a body is rare: give its memory back at once
-    }
-  }
+  // remove() leaves the removed body's pair states for the next step, whose alignStates()
+  // drops every pair the broadphase no longer reports (a compaction per remove() made removing
+  // many bodies quadratic in the states); until then coherentStates() skips them.
+  bool removed_states = false;
 
   BodyHandle add(Body&& b) {
     uint32_t slot;
@@ -439,17 +429,20 @@ struct DistanceService::Impl {
     return b.kind == BodyKind::kRigid ? b.rigid->toBody(p) : p;
   }
 
-  // The broadphase of one block: candidate lists in s.candidates; statuses written.
+  // The broadphase of one block: candidate lists in s.candidates (point j's from
+  // s.candidate_begin[j] to [j + 1]); statuses written. With `closest_only` (closest mode) a
+  // body whose box lies farther than the farthest point of another candidate's box is left
+  // out: that box holds a surface point nearer than anything the first can hold.
   void blockCandidates(Scratch& s, const PointsRef& points, size_t first, uint32_t count, double d,
-                       StepResult& out, StepStats& stats) {
-    const size_t slots = bodies.size();
-    s.candidates.resize(std::max<size_t>(1, count * slots));
-    s.candidate_count.resize(count);
+                       bool closest_only, StepResult& out, StepStats& stats) {
+    s.found.resize(std::max<size_t>(1, broadphase.liveCount()));
+    s.candidates.clear();
+    s.candidate_begin.resize(count + 1);
     for (uint32_t j = 0; j < count; ++j) {
+      s.candidate_begin[j] = static_cast<uint32_t>(s.candidates.size());
       const Vec3 p = points.row(first + j).transpose();
       if (!inCoordinateRange(p)) {
         out.status_[first + j] = p.allFinite() ? PointStatus::kOutOfRange : PointStatus::kNotFinite;
-        s.candidate_count[j] = 0;
         ++stats.invalid_points;
         continue;
       }
@@ -457,25 +450,40 @@ struct DistanceService::Impl {
       // key-framed or deforming body, where q = p: a point on a surface one ulp outside such a
       // body's exact box is still on it; a rigid body's box has its own margin).
       const double reach = std::max(d, 2 * kSurfaceRounding * p.cwiseAbs().maxCoeff());
-      s.candidate_count[j] = static_cast<uint32_t>(broadphase.candidates(p, reach, s.candidates.data() + j * slots));
-      stats.pairs += s.candidate_count[j];
+      const size_t found = broadphase.candidates(p, reach, s.found.data());
+      double nearest_far2 = kInf;  // the least squared distance to a candidate box's farthest point
+      if (closest_only && found > 1)
+        for (size_t k = 0; k < found; ++k) {
+          const Box3& box = bodies[s.found[k]].box;
+          nearest_far2 = std::min(nearest_far2, (p - box.lower).cwiseAbs().cwiseMax((p - box.upper).cwiseAbs()).squaredNorm());
+        }
+      for (size_t k = 0; k < found; ++k) {
+        if (nearest_far2 < kInf) {
+          const Box3& box = bodies[s.found[k]].box;
+          const double near2 = (box.lower - p).cwiseMax(p - box.upper).cwiseMax(0.0).squaredNorm();
+          if (near2 > nearest_far2 * (1 + 1e-12)) continue;  // the relative margin covers rounding
+        }
+        s.candidates.push_back(s.found[k]);
+      }
+      stats.pairs += s.candidates.size() - s.candidate_begin[j];
     }
+    s.candidate_begin[count] = static_cast<uint32_t>(s.candidates.size());
   }
 
   // The block's pair states for this step's candidates (s.candidates): reused in place when
   // every point kept its bodies; else rebuilt, keeping the states of the pairs that remain.
   BlockStates& alignStates(Scratch& s, size_t block, uint32_t count) {
-    const size_t slots = bodies.size();
     BlockStates& states = blocks[block];
     bool same = states.points == count;
     for (uint32_t j = 0; same && j < count; ++j) {
-      const uint32_t* cand = s.candidates.data() + j * slots;
+      const uint32_t* cand = s.candidates.data() + s.candidate_begin[j];
+      const uint32_t found = s.candidate_begin[j + 1] - s.candidate_begin[j];
       const uint32_t b0 = states.begin[j];
       // This pass is the first to touch the block's states: start loading the ones ahead (the
       // queries below read them whole).
       if (b0 + 4 < states.pairs.size()) prefetchPair(states.pairs[b0 + 4]);
-      same = states.begin[j + 1] - b0 == s.candidate_count[j];
-      for (uint32_t k = 0; same && k < s.candidate_count[j]; ++k)
+      same = states.begin[j + 1] - b0 == found;
+      for (uint32_t k = 0; same && k < found; ++k)
         same = states.pairs[b0 + k].slot == cand[k] && states.pairs[b0 + k].generation == bodies[cand[k]].generation;
     }
     if (!same) {
@@ -485,8 +493,9 @@ struct DistanceService::Impl {
         s.begin[j] = static_cast<uint32_t>(s.pairs.size());
         uint32_t o = j < states.points ? states.begin[j] : 0;
         const uint32_t o_end = j < states.points ? states.begin[j + 1] : 0;
-        const uint32_t* cand = s.candidates.data() + j * slots;
-        for (uint32_t k = 0; k < s.candidate_count[j]; ++k) {
+        const uint32_t* cand = s.candidates.data() + s.candidate_begin[j];
+        const uint32_t found = s.candidate_begin[j + 1] - s.candidate_begin[j];
+        for (uint32_t k = 0; k < found; ++k) {
           const uint32_t slot = cand[k];
           while (o < o_end && states.pairs[o].slot < slot) ++o;
           if (o < o_end && states.pairs[o].slot == slot && states.pairs[o].generation == bodies[slot].generation) {
@@ -505,9 +514,11 @@ struct DistanceService::Impl {
       std::swap(states.begin, s.begin);
       std::swap(states.pairs, s.pairs);
       states.points = count;
-      // Keep memory bounded by what the block needs now (with slack against churn).
-      if (states.pairs.capacity() > 4 * states.pairs.size() + 64) states.pairs.shrink_to_fit();
-      if (s.pairs.capacity() > 4 * states.pairs.size() + 64) {
+      // Keep memory bounded by what the block needs now (with slack against churn; none when
+      // no pair is left: its points left every body, or the bodies were removed).
+      const size_t keep = states.pairs.empty() ? 0 : 4 * states.pairs.size() + 64;
+      if (states.pairs.capacity() > keep) states.pairs.shrink_to_fit();
+      if (s.pairs.capacity() > keep) {
         s.pairs.clear();
         s.pairs.shrink_to_fit();
       }
@@ -523,17 +534,17 @@ struct DistanceService::Impl {
     StepStats& stats;
     BlockStates& states;
   };
-  BlockWork beginBlock(size_t block, const PointsRef& points, double d, StepResult& out) {
+  BlockWork beginBlock(size_t block, const PointsRef& points, double d, bool closest_only, StepResult& out) {
     Scratch& s = scratch.local();
     const size_t first = block * options.block_size;
     const uint32_t count = static_cast<uint32_t>(std::min<size_t>(options.block_size, points.rows() - first));
     StepStats& stats = block_stats[block];
-    blockCandidates(s, points, first, count, d, out, stats);
+    blockCandidates(s, points, first, count, d, closest_only, out, stats);
     return {s, first, count, stats, alignStates(s, block, count)};
   }
 
   void closestBlock(size_t block, const PointsRef& points, double d, StepResult& out) {
-    auto&& [s, first, count, stats, states] = beginBlock(block, points, d, out);
+    auto&& [s, first, count, stats, states] = beginBlock(block, points, d, true, out);
 
     // Two passes: the queries, then the hits. A hit's pseudonormal is a table lookup that
     // usually misses the cache; the first pass starts loading it, the second reads it.
@@ -592,7 +603,7 @@ struct DistanceService::Impl {
   }
 
   void withinBlock(size_t block, const PointsRef& points, double d, StepResult& out) {
-    auto&& [s, first, count, stats, states] = beginBlock(block, points, d, out);
+    auto&& [s, first, count, stats, states] = beginBlock(block, points, d, false, out);
     std::vector<DistanceHit>& hits = block_hits[block];
     hits.clear();
     for (uint32_t j = 0; j < count; ++j) {
@@ -678,9 +689,13 @@ std::shared_ptr<const BodyShape> DistanceService::shapeFor(const std::shared_ptr
   if (shape && shape->hierarchy() == hierarchy) return shape;
   shape = BodyShape::build(hierarchy);
   entry = shape;
-  // Forget shapes no body uses any more.
-  for (auto i = impl_->shapes.begin(); i != impl_->shapes.end();)
-    i = i->second.expired() ? impl_->shapes.erase(i) : std::next(i);
+  // Forget shapes no body uses any more, once the table has doubled since the last sweep (a
+  // sweep per new shape made adding bodies of distinct meshes quadratic).
+  if (impl_->shapes.size() >= 2 * impl_->shapes_swept + 16) {
+    for (auto i = impl_->shapes.begin(); i != impl_->shapes.end();)
+      i = i->second.expired() ? impl_->shapes.erase(i) : std::next(i);
+    impl_->shapes_swept = impl_->shapes.size();
+  }
   return shape;
 }
 
@@ -732,7 +747,7 @@ void DistanceService::remove(BodyHandle handle) {
   --impl_->live;
   for (Scratch& s : impl_->scratch)
     if (handle.index < s.streams.size()) s.streams[handle.index] = StreamSlot{};
-  impl_->dropStates(handle.index);
+  impl_->removed_states = true;  // its states are dropped at the next step
 }
 
 bool DistanceService::contains(BodyHandle h) const {
@@ -876,7 +891,11 @@ void DistanceService::step(PointsRef points, double max_distance, QueryMode mode
   if (std::isnan(max_distance) || max_distance < 0)
     throw std::invalid_argument("DistanceService::step: max_distance must be >= 0 (got " +
                                 std::to_string(max_distance) + ")");
+  if (mode != QueryMode::kClosest && mode != QueryMode::kWithin)
+    throw std::invalid_argument("DistanceService::step: unknown query mode " +
+                                std::to_string(static_cast<int>(mode)));
   Impl& m = *impl_;
+  m.removed_states = false;  // this step's alignStates() drops them (see remove())
   auto start = std::chrono::steady_clock::now();
   const uint32_t refreshed = m.refreshBoxes();
   const double bounds_seconds = secondsSince(start);
@@ -895,6 +914,7 @@ void DistanceService::step(PointsRef points, double max_distance, QueryMode mode
   if (mode == QueryMode::kClosest) {
     out.begin_.clear();
     out.hits_.resize(n);
+    std::vector<std::vector<DistanceHit>>().swap(m.block_hits);  // a within step's hits
   } else {
     out.begin_.resize(n);
     m.block_hits.resize(block_count);
@@ -918,7 +938,10 @@ void DistanceService::step(PointsRef points, double max_distance, QueryMode mode
     out.hits_.resize(offset[block_count]);
     m.arena->execute([&] {
       tbb::parallel_for(size_t(0), block_count, [&](size_t b) {
-        std::copy(m.block_hits[b].begin(), m.block_hits[b].end(), out.hits_.begin() + offset[b]);
+        std::vector<DistanceHit>& hits = m.block_hits[b];
+        std::copy(hits.begin(), hits.end(), out.hits_.begin() + offset[b]);
+        // The result holds the hits now: keep room for about as many next step, no more.
+        if (hits.capacity() > 2 * hits.size() + 64) std::vector<DistanceHit>().swap(hits);
         const size_t last = std::min(n, (b + 1) * bs);
         for (size_t i = b * bs; i < last; ++i) out.begin_[i] += offset[b];
       });
@@ -960,7 +983,16 @@ unsigned DistanceService::threads() const { return static_cast<unsigned>(impl_->
 
 size_t DistanceService::coherentStates() const {
   size_t total = 0;
-  for (const BlockStates& b : impl_->blocks) total += b.pairs.size();
+  for (const BlockStates& b : impl_->blocks) {
+    if (!impl_->removed_states) {
+      total += b.pairs.size();
+      continue;
+    }
+    for (const PairState& pair : b.pairs) {  // a removed body's states wait for the next step
+      const Body& body = impl_->bodies[pair.slot];
+      total += body.alive && body.generation == pair.generation;
+    }
+  }
   return total;
 }
 

@@ -16,8 +16,8 @@
 // broadphase no longer reports (the point left the body's box inflated by the query distance)
 // is dropped, and starts cold if it comes back. Memory is therefore bounded by the pairs of
 // the last step. A state is tied to the body's handle: removing a body drops its states (a new
-// body in the same slot has a new generation and starts cold); remove() frees their memory at
-// once.
+// body in the same slot has a new generation and starts cold); the next step frees their
+// memory, in one pass for every body removed since.
 //
 // Threads: step() splits the points into fixed blocks of ServiceOptions::block_size points and
 // runs them with tbb::parallel_for in the service's own tbb::task_arena (setThreads()). Each
@@ -281,7 +281,8 @@ class DistanceService {
   void setThreads(unsigned threads);
   unsigned threads() const;
 
-  // Coherent states currently kept, and their memory in bytes (capacity).
+  // Coherent states currently kept (not counting removed bodies'), and their memory in bytes
+  // (capacity; a removed body's states until the next step).
   size_t coherentStates() const;
   size_t coherentStateBytes() const;
   // Drops every coherent state (the next step starts cold).

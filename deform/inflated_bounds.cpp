@@ -7,6 +7,7 @@
 #include "deform/inflated_bounds.h"
 
 #include <algorithm>
+#include <cstdio>
 #include <cmath>
 #include <limits>
 #include <stdexcept>
@@ -76,8 +77,12 @@ void DeformingBody::refreshInlineFaces() {
 // overflow the exact distance: refused like a mesh of that size.
 void DeformingBody::checkExtent(double diagonal, const char* what) const {
   if (diagonal > kMaxMeshSize)
-    throw std::invalid_argument(std::string("DeformingBody: the ") + what + " span " + std::to_string(diagonal) +
+  {
+    char span[32];
+    std::snprintf(span, sizeof span, "%.3g", diagonal);
+    throw std::invalid_argument(std::string("DeformingBody: the ") + what + " span " + span +
                                 " (bounding-box diagonal), beyond the supported mesh size 1e50");
+  }
 }
 
 void DeformingBody::checkSize(size_t count, const char* what) const {
@@ -92,7 +97,7 @@ void DeformingBody::anchor(const std::vector<Vec3>& positions) {
     if (!inCoordinateRange(positions[v]))
       throw std::invalid_argument("DeformingBody: anchor position " + std::to_string(v) +
                                   " is not finite or beyond 1e150 in magnitude");
-  checkExtent(positionsDiagonal(positions), "anchor positions");
+  checkExtent(positionsDiagonal(positions), "positions");
   anchor_positions_ = positions;
   positions_ = positions;
   anchor_nodes_ = hierarchy_->nodes();
