@@ -5,6 +5,7 @@
 #include <cassert>
 #include <cmath>
 #include <limits>
+#include <numeric>
 
 #if defined(__AVX__)
 #include <immintrin.h>
@@ -55,6 +56,7 @@ void Broadphase::pad() {
 
 void Broadphase::set(size_t slot, const Box3& box) {
   assert(slot < dense_of_.size());
+  tree_ready_ = false;
   uint32_t at = dense_of_[slot];
   if (box.empty()) {
     if (at == kNoPosition) return;
@@ -99,8 +101,103 @@ Box3 Broadphase::box(size_t slot) const {
   return b;
 }
 
+namespace {
+
+// The squared distance from (px, py, pz) to box k of the arrays, as the flat loop computes it.
+inline double boxSquared(const double* const lower[3], const double* const upper[3], size_t k, double px, double py,
+                         double pz) {
+  const double gx = std::max(std::max(lower[0][k] - px, px - upper[0][k]), 0.0);
+  const double gy = std::max(std::max(lower[1][k] - py, py - upper[1][k]), 0.0);
+  const double gz = std::max(std::max(lower[2][k] - pz, pz - upper[2][k]), 0.0);
+  return (gx * gx + gy * gy) + gz * gz;
+}
+
+}  // namespace
+
+uint32_t Broadphase::buildTree(uint32_t first, uint32_t count) {
+  TreeNode node{};
+  double centre_lower[3], centre_upper[3];
+  for (int axis = 0; axis < 3; ++axis) {
+    node.lower[axis] = centre_lower[axis] = kInf;
+    node.upper[axis] = centre_upper[axis] = -kInf;
+  }
+  auto centre = [this](int axis, uint32_t k) { return 0.5 * lower_[axis][k] + 0.5 * upper_[axis][k]; };
+  for (uint32_t i = first; i < first + count; ++i) {
+    const uint32_t k = order_[i];
+    for (int axis = 0; axis < 3; ++axis) {
+      node.lower[axis] = std::min(node.lower[axis], lower_[axis][k]);
+      node.upper[axis] = std::max(node.upper[axis], upper_[axis][k]);
+      centre_lower[axis] = std::min(centre_lower[axis], centre(axis, k));
+      centre_upper[axis] = std::max(centre_upper[axis], centre(axis, k));
+    }
+  }
+  const uint32_t index = static_cast<uint32_t>(tree_.size());
+  tree_.push_back(node);
+  constexpr uint32_t kLeafBoxes = 8;
+  if (count <= kLeafBoxes) {
+    tree_[index].first = first;
+    tree_[index].count = count;
+    return index;
+  }
+  // Median split along the widest spread of the box centres.
+  int axis = 0;
+  for (int a = 1; a < 3; ++a)
+    if (centre_upper[a] - centre_lower[a] > centre_upper[axis] - centre_lower[axis]) axis = a;
+  const uint32_t half = count / 2;
+  std::nth_element(order_.begin() + first, order_.begin() + first + half, order_.begin() + first + count,
+                   [&](uint32_t a, uint32_t b) {
+                     return centre(axis, a) < centre(axis, b) || (centre(axis, a) == centre(axis, b) && a < b);
+                   });
+  const uint32_t left = buildTree(first, half);
+  const uint32_t right = buildTree(first + half, count - half);
+  tree_[index].left = left;
+  tree_[index].right = right;
+  return index;
+}
+
+void Broadphase::prepare() {
+  if (tree_ready_ || slot_of_.size() <= kTreeBodies) return;
+  order_.resize(slot_of_.size());
+  std::iota(order_.begin(), order_.end(), 0u);
+  tree_.clear();
+  buildTree(0, static_cast<uint32_t>(order_.size()));
+  tree_ready_ = true;
+}
+
+// The tree's nodes bound their boxes by the min and max of their coordinates, so a node's
+// computed squared distance is at most any of its boxes' (rounding is monotone): a node is
+// skipped only when none of its boxes would pass the flat loop's test.
+size_t Broadphase::candidatesInTree(const Vec3& p, double limit, uint32_t* out) const {
+  const double px = p.x(), py = p.y(), pz = p.z();
+  const double* const lower[3] = {lower_[0].data(), lower_[1].data(), lower_[2].data()};
+  const double* const upper[3] = {upper_[0].data(), upper_[1].data(), upper_[2].data()};
+  size_t n = 0;
+  uint32_t stack[64];
+  int top = 0;
+  stack[top++] = 0;
+  while (top > 0) {
+    const TreeNode& node = tree_[stack[--top]];
+    const double gx = std::max(std::max(node.lower[0] - px, px - node.upper[0]), 0.0);
+    const double gy = std::max(std::max(node.lower[1] - py, py - node.upper[1]), 0.0);
+    const double gz = std::max(std::max(node.lower[2] - pz, pz - node.upper[2]), 0.0);
+    if (!((gx * gx + gy * gy) + gz * gz <= limit)) continue;
+    if (node.count > 0) {
+      for (uint32_t i = node.first; i < node.first + node.count; ++i) {
+        const uint32_t k = order_[i];
+        if (boxSquared(lower, upper, k, px, py, pz) <= limit) out[n++] = slot_of_[k];
+      }
+      continue;
+    }
+    stack[top++] = node.right;
+    stack[top++] = node.left;
+  }
+  std::sort(out, out + n);  // by increasing slot, as the flat loop gives them
+  return n;
+}
+
 size_t Broadphase::candidates(const Vec3& p, double distance, uint32_t* out) const {
   const double limit = squaredLimit(distance);
+  if (tree_ready_) return candidatesInTree(p, limit, out);
   const double px = p.x(), py = p.y(), pz = p.z();
   const double* lx = lower_[0].data();
   const double* ly = lower_[1].data();

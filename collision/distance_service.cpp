@@ -345,6 +345,7 @@ struct DistanceService::Impl {
       bodies[s].box_dirty = false;
       broadphase.set(s, bodies[s].box);
     }
+    broadphase.prepare();  // the tree over many bodies, before the threads read it
     return static_cast<uint32_t>(dirty.size());
   }
 

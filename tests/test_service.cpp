@@ -766,7 +766,8 @@ TEST_CASE("pseudonormals on demand equal the precomputed rest tables", "[service
 
 TEST_CASE("broadphase equals its reference", "[service][broadphase]") {
   Random random(3);
-  for (size_t count : {size_t(1), size_t(3), size_t(4), size_t(17), size_t(64)}) {
+  // Past Broadphase::kTreeBodies live boxes, prepare() builds the tree the queries descend.
+  for (size_t count : {size_t(1), size_t(3), size_t(4), size_t(17), size_t(64), size_t(400), size_t(1500)}) {
     Broadphase flat;
     BroadphaseReference reference;
     flat.resize(count);
@@ -786,6 +787,7 @@ TEST_CASE("broadphase equals its reference", "[service][broadphase]") {
     // Rounds of queries; between rounds slots are switched off, on and moved (only the slots
     // with a box are in the flat loop, kept in slot order).
     for (int round = 0; round < 4; ++round) {
+      flat.prepare();
       for (int i = 0; i < 500; ++i) {
         const Vec3 p = random.inBox(Vec3::Constant(-8), Vec3::Constant(8));
         for (double d : {0.0, 0.5, 2.0, kInf}) {
