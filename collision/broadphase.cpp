@@ -43,52 +43,66 @@ void Broadphase::resize(size_t slots) {
 }
 
 void Broadphase::pad() {
-  const size_t live = slot_of_.size(), padded = (live + 3) / 4 * 4;
+  const size_t positions = slot_of_.size(), padded = (positions + 3) / 4 * 4;
   for (int axis = 0; axis < 3; ++axis) {
-    lower_[axis].resize(padded);
-    upper_[axis].resize(padded);
-    for (size_t k = live; k < padded; ++k) {
-      lower_[axis][k] = kInf;
-      upper_[axis][k] = -kInf;
-    }
+    lower_[axis].resize(padded, kInf);
+    upper_[axis].resize(padded, -kInf);
   }
 }
 
+// O(1): a slot switched off leaves an empty box at its position (a hole, never reported), one
+// switched on is appended; prepare() closes the holes and restores slot order.
 void Broadphase::set(size_t slot, const Box3& box) {
   assert(slot < dense_of_.size());
   tree_ready_ = false;
   uint32_t at = dense_of_[slot];
   if (box.empty()) {
     if (at == kNoPosition) return;
-    // Out of the loop: the later slots move down one position.
     for (int axis = 0; axis < 3; ++axis) {
-      lower_[axis].erase(lower_[axis].begin() + at);
-      upper_[axis].erase(upper_[axis].begin() + at);
+      lower_[axis][at] = kInf;
+      upper_[axis][at] = -kInf;
     }
-    slot_of_.erase(slot_of_.begin() + at);
-    for (size_t k = at; k < slot_of_.size(); ++k) dense_of_[slot_of_[k]] = static_cast<uint32_t>(k);
     dense_of_[slot] = kNoPosition;
-    pad();
+    ++holes_;
     return;
   }
   if (at == kNoPosition) {
-    // Into the loop at its slot's place: the later slots move up one position.
-    at = static_cast<uint32_t>(std::lower_bound(slot_of_.begin(), slot_of_.end(), static_cast<uint32_t>(slot)) -
-                               slot_of_.begin());
-    for (int axis = 0; axis < 3; ++axis) {
-      lower_[axis].resize(slot_of_.size());
-      upper_[axis].resize(slot_of_.size());
-      lower_[axis].insert(lower_[axis].begin() + at, 0.0);
-      upper_[axis].insert(upper_[axis].begin() + at, 0.0);
-    }
-    slot_of_.insert(slot_of_.begin() + at, static_cast<uint32_t>(slot));
-    for (size_t k = at; k < slot_of_.size(); ++k) dense_of_[slot_of_[k]] = static_cast<uint32_t>(k);
+    at = static_cast<uint32_t>(slot_of_.size());
+    if (!slot_of_.empty() && slot_of_.back() > slot) unordered_ = true;
+    slot_of_.push_back(static_cast<uint32_t>(slot));
+    dense_of_[slot] = at;
     pad();
   }
   for (int axis = 0; axis < 3; ++axis) {
     lower_[axis][at] = box.lower[axis];
     upper_[axis][at] = box.upper[axis];
   }
+}
+
+void Broadphase::compact() {
+  if (holes_ == 0 && !unordered_) return;
+  std::vector<uint32_t> live;  // the slots still switched on (a hole's slot may be again, elsewhere)
+  for (size_t k = 0; k < slot_of_.size(); ++k) {
+    const uint32_t slot = slot_of_[k];
+    if (slot < dense_of_.size() && dense_of_[slot] == k) live.push_back(slot);
+  }
+  std::sort(live.begin(), live.end());
+  std::vector<double> lower[3], upper[3];
+  for (int axis = 0; axis < 3; ++axis) {
+    lower[axis].reserve(live.size() + 3);
+    upper[axis].reserve(live.size() + 3);
+    for (uint32_t slot : live) {
+      lower[axis].push_back(lower_[axis][dense_of_[slot]]);
+      upper[axis].push_back(upper_[axis][dense_of_[slot]]);
+    }
+    lower_[axis].swap(lower[axis]);
+    upper_[axis].swap(upper[axis]);
+  }
+  for (size_t k = 0; k < live.size(); ++k) dense_of_[live[k]] = static_cast<uint32_t>(k);
+  slot_of_.swap(live);
+  holes_ = 0;
+  unordered_ = false;
+  pad();
 }
 
 Box3 Broadphase::box(size_t slot) const {
@@ -156,6 +170,7 @@ uint32_t Broadphase::buildTree(uint32_t first, uint32_t count) {
 }
 
 void Broadphase::prepare() {
+  compact();
   if (tree_ready_ || slot_of_.size() <= kTreeBodies) return;
   order_.resize(slot_of_.size());
   std::iota(order_.begin(), order_.end(), 0u);
@@ -198,6 +213,12 @@ size_t Broadphase::candidatesInTree(const Vec3& p, double limit, uint32_t* out) 
 size_t Broadphase::candidates(const Vec3& p, double distance, uint32_t* out) const {
   const double limit = squaredLimit(distance);
   if (tree_ready_) return candidatesInTree(p, limit, out);
+  const size_t n = flatCandidates(p, limit, out);
+  if (unordered_) std::sort(out, out + n);  // slots switched on since prepare() were appended
+  return n;
+}
+
+size_t Broadphase::flatCandidates(const Vec3& p, double limit, uint32_t* out) const {
   const double px = p.x(), py = p.y(), pz = p.z();
   const double* lx = lower_[0].data();
   const double* ly = lower_[1].data();

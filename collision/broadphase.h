@@ -14,8 +14,9 @@
 // pair, so the broadphase is 1-2% of a step. The flat loop has no build cost (bodies move every
 // step), no cell-size parameter, and its cost does not depend on where points fall; a grid or
 // a tree over the bodies pays off only beyond ~64 bodies. Only the slots with a box are in the
-// loop (kept in slot order, so a slot switched on or off costs a move of the others): a world
-// that once held many bodies and now holds few costs what the few cost. Beyond kTreeBodies
+// loop: a world that once held many bodies and now holds few costs what the few cost. set() is
+// O(1): a slot switched off leaves a hole, one switched on is appended, and prepare() restores
+// the slot order once for all of them. Beyond kTreeBodies
 // live bodies, prepare() builds a binary tree over the boxes (median splits, leaves of up to
 // 8, rebuilt when a box changed), which candidates() descends with the same per-box test, so
 // the answers are the same: measured equal to the flat loop at 256 bodies, 2.7x faster at
@@ -43,7 +44,7 @@ class Broadphase {
   void resize(size_t slots);
   size_t size() const { return dense_of_.size(); }
   // Slots with a box (non-empty).
-  size_t liveCount() const { return slot_of_.size(); }
+  size_t liveCount() const { return slot_of_.size() - holes_; }
   // Sets slot `slot`'s world box (an empty box to switch the slot off). Precondition:
   // slot < size(); box coordinates are not NaN.
   void set(size_t slot, const Box3& box);
@@ -62,6 +63,8 @@ class Broadphase {
 
  private:
   void pad();
+  void compact();
+  size_t flatCandidates(const Vec3& p, double limit, uint32_t* out) const;
   size_t candidatesInTree(const Vec3& p, double limit, uint32_t* out) const;
   struct TreeNode {
     double lower[3], upper[3];  // the union of the boxes below
@@ -73,7 +76,9 @@ class Broadphase {
   std::vector<uint32_t> order_;  // positions, grouped by leaf
   bool tree_ready_ = false;
   std::vector<uint32_t> dense_of_;  // [slot] position in the arrays below, or UINT32_MAX (empty)
-  std::vector<uint32_t> slot_of_;   // [position] slot, increasing
+  std::vector<uint32_t> slot_of_;   // [position] slot, increasing after prepare()
+  size_t holes_ = 0;                // positions of slots switched off since (empty boxes)
+  bool unordered_ = false;          // a slot was appended out of order since
   // [axis][position] padded to a multiple of 4 with empty boxes (lower = +inf, upper = -inf).
   std::vector<double> lower_[3], upper_[3];
 };

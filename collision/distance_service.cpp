@@ -452,17 +452,27 @@ struct DistanceService::Impl {
       // body's exact box is still on it; a rigid body's box has its own margin).
       const double reach = std::max(d, 2 * kSurfaceRounding * p.cwiseAbs().maxCoeff());
       const size_t found = broadphase.candidates(p, reach, s.found.data());
-      double nearest_far2 = kInf;  // the least squared distance to a candidate box's farthest point
-      if (closest_only && found > 1)
+      // The least distance to a candidate box's farthest point bounds the closest hit; a body
+      // whose box is farther cannot hold it. The margin covers the rounding of the distances
+      // the queries compute (a rigid body's are in its frame: surfaceRounding()'s scale), so
+      // pruning never picks between two hits that rounding could order either way.
+      double nearest_far = kInf, margin = 0;
+      if (closest_only && found > 1) {
+        double scale = p.cwiseAbs().maxCoeff();
         for (size_t k = 0; k < found; ++k) {
-          const Box3& box = bodies[s.found[k]].box;
-          nearest_far2 = std::min(nearest_far2, (p - box.lower).cwiseAbs().cwiseMax((p - box.upper).cwiseAbs()).squaredNorm());
+          const Body& b = bodies[s.found[k]];
+          nearest_far = std::min(nearest_far, (p - b.box.lower).cwiseAbs().cwiseMax((p - b.box.upper).cwiseAbs()).norm());
+          double body_scale = b.box.lower.cwiseAbs().cwiseMax(b.box.upper.cwiseAbs()).maxCoeff();
+          if (b.kind == BodyKind::kRigid) body_scale += b.rigid->pose().translation().cwiseAbs().maxCoeff();
+          scale = std::max(scale, body_scale);
         }
+        margin = 4 * kSurfaceRounding * scale;
+      }
       for (size_t k = 0; k < found; ++k) {
-        if (nearest_far2 < kInf) {
+        if (nearest_far < kInf) {
           const Box3& box = bodies[s.found[k]].box;
-          const double near2 = (box.lower - p).cwiseMax(p - box.upper).cwiseMax(0.0).squaredNorm();
-          if (near2 > nearest_far2 * (1 + 1e-12)) continue;  // the relative margin covers rounding
+          const double near = (box.lower - p).cwiseMax(p - box.upper).cwiseMax(0.0).norm();
+          if (near > nearest_far * (1 + 1e-12) + margin) continue;
         }
         s.candidates.push_back(s.found[k]);
       }

@@ -1070,11 +1070,16 @@ TextRepair textRepair(const std::string& path, std::istream& in, Format format, 
   in.seekg(0);
   TextRepair repair;
   if (format == Format::kStl) {
+    // Text: 'solid' and a blank first (as checkStl decides), no zero byte (binary records
+    // nearly always hold one), and a size that is not a binary file's.
     if (start.size() >= 84 &&
         84 + 50 * std::uint64_t(littleEndian32(reinterpret_cast<const unsigned char*>(start.data()) + 80)) == file_size)
       return repair;
     const std::size_t first = start.find_first_not_of(" \t\r\n\v\f", start.compare(0, 3, "\xEF\xBB\xBF") == 0 ? 3 : 0);
-    if (first == std::string::npos || start.compare(first, 5, "solid") != 0) return repair;
+    if (first == std::string::npos || start.compare(first, 5, "solid") != 0 || first + 5 >= start.size() ||
+        (start[first + 5] != ' ' && start[first + 5] != '\n' && start[first + 5] != '\r') ||
+        start.find('\0') != std::string::npos)
+      return repair;
   }
   repair.bom = start.compare(0, 3, "\xEF\xBB\xBF") == 0;
   repair.cr_only = start.find('\r') != std::string::npos && start.find('\n') == std::string::npos;
@@ -1097,7 +1102,10 @@ Mesh readMesh(const std::string& path) {
     file.seekg(repair.bom ? 3 : 0);
     std::string text(std::istreambuf_iterator<char>(file), {});
     if (file.bad()) fail(path, "read error");
-    if (repair.cr_only) std::replace(text.begin(), text.end(), '\r', '\n');
+    // CRs alone end lines; a CRLF past the first look (a first line longer than 64 KiB) stays.
+    if (repair.cr_only)
+      for (size_t i = 0; i < text.size(); ++i)
+        if (text[i] == '\r' && (i + 1 == text.size() || text[i + 1] != '\n')) text[i] = '\n';
     file_size = text.size();
     repaired.str(std::move(text));
   }

@@ -418,6 +418,39 @@ TEST_CASE("closest mode with an unlimited distance queries only the bodies that 
   }
 }
 
+// The pruning of closest mode allows for the rounding of the distances the queries compute: a
+// rigid body posed far from its mesh's coordinates (its frame change rounds by about eps times
+// the translation) and a body whose hits are within that rounding of it are both queried, so
+// closest mode gives within mode's first hit (found by review: 16 of 300 points differed).
+TEST_CASE("closest mode's pruning keeps the bodies rounding could order either way", "[service]") {
+  Mesh square, tiny;
+  const double x0 = 1e6 + 0.1, plane = x0 - 1e6;  // the square's world plane (exact)
+  square.positions = {Vec3(x0, -1, -1), Vec3(x0, 1, -1), Vec3(x0, 1, 1), Vec3(x0, -1, 1)};
+  square.triangles = {Triangle{0, 1, 2}, Triangle{0, 2, 3}};
+  size_t compared = 0;
+  for (int bi = 0; bi < 40; ++bi) {
+    const double b = plane - 2e-10 + bi * 1e-11;  // the tiny triangle's plane, -b, scanned
+    tiny.positions = {Vec3(-b, 0, 0), Vec3(-b, 1e-7, 0), Vec3(-b, 0, 1e-7)};
+    tiny.triangles = {Triangle{0, 1, 2}};
+    DistanceService service(ServiceOptions{1, 64});
+    service.addRigid(service.hierarchyFor(square), makePose(0, Vec3::UnitZ(), Vec3(-1e6, 0, 0)));
+    service.addKeyframed(service.hierarchyFor(tiny), {tiny.positions}, 0);
+    std::vector<Vec3> points;
+    for (int i = 0; i < 60; ++i) points.push_back(Vec3(i * 5e-12, 0, 0));
+    const StepResult closest = service.step(toMatrix(points), kInf, QueryMode::kClosest);
+    const StepResult within = service.step(toMatrix(points), 1.0, QueryMode::kWithin);
+    for (size_t i = 0; i < points.size(); ++i) {
+      INFO("b " << b << " point " << points[i].x());
+      REQUIRE(closest.closest(i) != nullptr);
+      REQUIRE(!within.hits(i).empty());
+      CHECK(closest.closest(i)->body.index == within.hits(i)[0].body.index);
+      CHECK(closest.closest(i)->distance == within.hits(i)[0].distance);
+      ++compared;
+    }
+  }
+  CHECK(compared == 2400);
+}
+
 TEST_CASE("sign from pseudonormals equals the winding number on closed meshes", "[service][sign]") {
   struct Case {
     std::string name;
@@ -787,8 +820,10 @@ TEST_CASE("broadphase equals its reference", "[service][broadphase]") {
     // Rounds of queries; between rounds slots are switched off, on and moved (only the slots
     // with a box are in the flat loop, kept in slot order).
     for (int round = 0; round < 4; ++round) {
-      flat.prepare();
+      // Queries right after the switches (holes, slots appended out of order), then after
+      // prepare() (order restored; the tree past kTreeBodies).
       for (int i = 0; i < 500; ++i) {
+        if (i == 100) flat.prepare();
         const Vec3 p = random.inBox(Vec3::Constant(-8), Vec3::Constant(8));
         for (double d : {0.0, 0.5, 2.0, kInf}) {
           const size_t nf = flat.candidates(p, d, out_flat.data());
