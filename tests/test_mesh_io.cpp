@@ -430,6 +430,16 @@ TEST_CASE("text files with a UTF-8 byte order mark or CR line ends read as witho
   }
   CHECK_THAT(readError(dir.write("bad.off", "OFF\r3 1 0\r0 0 0\r1 0 0\r0 1 0\r3 0 1 3\r")),
              Catch::Contains("line 6: face 0 uses vertex 3"));
+  // A CRLF file whose first line passes the 64 KiB the check looks at keeps its line numbers
+  // (found by review: it was taken for CR-only and each CRLF made two lines).
+  const std::string long_comment = "#" + std::string(65534, 'x') + "\r\n";  // its LF is byte 65537
+  CHECK_THAT(readError(dir.write("long.off", long_comment + "OFF\r\n3 1 0\r\n0 0 0\r\n1 0\r\n0 1 0\r\n3 0 1 2\r\n")),
+             Catch::Contains("line 5: vertex 1 has fewer than 3 coordinates"));
+  // A binary STL with a 'solid' header, a wrong size and a CR byte (0x0D) in its data is not
+  // repaired as text (its CR made a line break there): read as ASCII it has no 'endsolid'.
+  const std::vector<std::array<Vec3, 3>> cr_triangle = {{Vec3(1.0000015, 0, 0), Vec3(1, 0, 0), Vec3(0, 1, 0)}};
+  CHECK_THAT(readError(dir.write("cr.stl", binaryStl("solid part", cr_triangle, 1) + std::string(2, '\0'))),
+             Catch::Contains("(the ASCII STL ends inside its solid") && Catch::Contains("nor a binary one"));
   // A binary STL whose header starts with the mark and 'solid' stays binary.
   const std::vector<std::array<Vec3, 3>> triangles = {{kSquare[0], kSquare[1], kSquare[2]},
                                                       {kSquare[0], kSquare[2], kSquare[3]}};
