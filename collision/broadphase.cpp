@@ -252,8 +252,8 @@ size_t Broadphase::flatCandidates(const Vec3& p, double limit, uint32_t* out) co
     const double gx = std::max(std::max(lx[s] - px, px - ux[s]), 0.0);
     const double gy = std::max(std::max(ly[s] - py, py - uy[s]), 0.0);
     const double gz = std::max(std::max(lz[s] - pz, pz - uz[s]), 0.0);
-    out[n] = slot_of[s];
-    n += (gx * gx + gy * gy + gz * gz <= limit) ? 1 : 0;
+    // Written only when it passes: with holes, positions outnumber the live slots out holds.
+    if (gx * gx + gy * gy + gz * gz <= limit) out[n++] = slot_of[s];
   }
 #endif
   return n;

@@ -798,6 +798,23 @@ TEST_CASE("pseudonormals on demand equal the precomputed rest tables", "[service
 }
 
 TEST_CASE("broadphase equals its reference", "[service][broadphase]") {
+  // A hole at the last position (a slot switched off after prepare()): the answer fits in
+  // liveCount() entries (the loop without AVX wrote one past them; found by review).
+  {
+    Broadphase holes;
+    holes.resize(2);
+    Box3 unit;
+    unit.lower = Vec3::Zero();
+    unit.upper = Vec3::Ones();
+    holes.set(0, unit);
+    holes.set(1, unit);
+    holes.prepare();
+    holes.set(1, Box3{});
+    REQUIRE(holes.liveCount() == 1);
+    std::unique_ptr<uint32_t[]> out(new uint32_t[holes.liveCount()]);
+    CHECK(holes.candidates(Vec3::Constant(0.5), kInf, out.get()) == 1);
+    CHECK(out[0] == 0);
+  }
   Random random(3);
   // Past Broadphase::kTreeBodies live boxes, prepare() builds the tree the queries descend.
   for (size_t count : {size_t(1), size_t(3), size_t(4), size_t(17), size_t(64), size_t(400), size_t(1500)}) {
