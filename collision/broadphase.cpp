@@ -23,16 +23,22 @@ double squaredLimit(double distance) {
   return std::min(d2, std::numeric_limits<double>::max());
 }
 
+// The squared distance from (px, py, pz) to a box given by its corners, as every test here
+// computes it (the AVX loop included): the tree's node and leaf tests must agree with the flat
+// loop's to the bit.
+inline double squaredGap(double lx, double ly, double lz, double ux, double uy, double uz, double px, double py,
+                         double pz) {
+  const double gx = std::max(std::max(lx - px, px - ux), 0.0);
+  const double gy = std::max(std::max(ly - py, py - uy), 0.0);
+  const double gz = std::max(std::max(lz - pz, pz - uz), 0.0);
+  return (gx * gx + gy * gy) + gz * gz;
+}
+
 }  // namespace
 
 bool boxWithin(const Box3& box, const Vec3& p, double distance) {
   if (box.empty()) return false;
-  double d2 = 0;
-  for (int axis = 0; axis < 3; ++axis) {
-    const double gap = std::max({box.lower[axis] - p[axis], p[axis] - box.upper[axis], 0.0});
-    d2 += gap * gap;
-  }
-  return d2 <= squaredLimit(distance);
+  return squaredBoxDistance(box, p) <= squaredLimit(distance);
 }
 
 constexpr uint32_t kNoPosition = std::numeric_limits<uint32_t>::max();
@@ -115,19 +121,6 @@ Box3 Broadphase::box(size_t slot) const {
   return b;
 }
 
-namespace {
-
-// The squared distance from (px, py, pz) to box k of the arrays, as the flat loop computes it.
-inline double boxSquared(const double* const lower[3], const double* const upper[3], size_t k, double px, double py,
-                         double pz) {
-  const double gx = std::max(std::max(lower[0][k] - px, px - upper[0][k]), 0.0);
-  const double gy = std::max(std::max(lower[1][k] - py, py - upper[1][k]), 0.0);
-  const double gz = std::max(std::max(lower[2][k] - pz, pz - upper[2][k]), 0.0);
-  return (gx * gx + gy * gy) + gz * gz;
-}
-
-}  // namespace
-
 uint32_t Broadphase::buildTree(uint32_t first, uint32_t count) {
   TreeNode node{};
   double centre_lower[3], centre_upper[3];
@@ -184,22 +177,21 @@ void Broadphase::prepare() {
 // skipped only when none of its boxes would pass the flat loop's test.
 size_t Broadphase::candidatesInTree(const Vec3& p, double limit, uint32_t* out) const {
   const double px = p.x(), py = p.y(), pz = p.z();
-  const double* const lower[3] = {lower_[0].data(), lower_[1].data(), lower_[2].data()};
-  const double* const upper[3] = {upper_[0].data(), upper_[1].data(), upper_[2].data()};
   size_t n = 0;
   uint32_t stack[64];
   int top = 0;
   stack[top++] = 0;
   while (top > 0) {
     const TreeNode& node = tree_[stack[--top]];
-    const double gx = std::max(std::max(node.lower[0] - px, px - node.upper[0]), 0.0);
-    const double gy = std::max(std::max(node.lower[1] - py, py - node.upper[1]), 0.0);
-    const double gz = std::max(std::max(node.lower[2] - pz, pz - node.upper[2]), 0.0);
-    if (!((gx * gx + gy * gy) + gz * gz <= limit)) continue;
+    if (!(squaredGap(node.lower[0], node.lower[1], node.lower[2], node.upper[0], node.upper[1], node.upper[2], px,
+                     py, pz) <= limit))
+      continue;
     if (node.count > 0) {
       for (uint32_t i = node.first; i < node.first + node.count; ++i) {
         const uint32_t k = order_[i];
-        if (boxSquared(lower, upper, k, px, py, pz) <= limit) out[n++] = slot_of_[k];
+        if (squaredGap(lower_[0][k], lower_[1][k], lower_[2][k], upper_[0][k], upper_[1][k], upper_[2][k], px, py,
+                       pz) <= limit)
+          out[n++] = slot_of_[k];
       }
       continue;
     }
@@ -248,13 +240,9 @@ size_t Broadphase::flatCandidates(const Vec3& p, double limit, uint32_t* out) co
     }
   }
 #else
-  for (size_t s = 0; s < live; ++s) {
-    const double gx = std::max(std::max(lx[s] - px, px - ux[s]), 0.0);
-    const double gy = std::max(std::max(ly[s] - py, py - uy[s]), 0.0);
-    const double gz = std::max(std::max(lz[s] - pz, pz - uz[s]), 0.0);
-    // Written only when it passes: with holes, positions outnumber the live slots out holds.
-    if (gx * gx + gy * gy + gz * gz <= limit) out[n++] = slot_of[s];
-  }
+  // Written only when it passes: with holes, positions outnumber the live slots out holds.
+  for (size_t s = 0; s < live; ++s)
+    if (squaredGap(lx[s], ly[s], lz[s], ux[s], uy[s], uz[s], px, py, pz) <= limit) out[n++] = slot_of[s];
 #endif
   return n;
 }

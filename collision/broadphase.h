@@ -16,15 +16,16 @@
 // a tree over the bodies pays off only beyond ~64 bodies. Only the slots with a box are in the
 // loop: a world that once held many bodies and now holds few costs what the few cost. set() is
 // O(1): a slot switched off leaves a hole, one switched on is appended, and prepare() restores
-// the slot order once for all of them. Beyond kTreeBodies
-// live bodies, prepare() builds a binary tree over the boxes (median splits, leaves of up to
-// 8, rebuilt when a box changed), which candidates() descends with the same per-box test, so
-// the answers are the same: measured equal to the flat loop at 256 bodies, 2.7x faster at
-// 1024 and 8x at 4096 (bench/README.md).
+// the slot order once for all of them. Beyond kTreeBodies live bodies, prepare() builds a
+// binary tree over the boxes (median splits, leaves of up to 8, rebuilt when a box changed),
+// which candidates() descends with the same per-box test, so the answers are the same:
+// measured equal to the flat loop at 256 bodies, 2.7x faster at 1024 and 8x at 4096
+// (bench/README.md).
 // BroadphaseReference answers the same question box by box (array of structures, scalar) for
 // the tests.
 #include "core/types.h"
 
+#include <algorithm>
 #include <cstddef>
 #include <cstdint>
 #include <vector>
@@ -89,6 +90,16 @@ class BroadphaseReference {
   std::vector<Box3> boxes;  // [slot]
   size_t candidates(const Vec3& p, double distance, uint32_t* out) const;
 };
+
+// The squared distance from p to a non-empty box, computed in double.
+inline double squaredBoxDistance(const Box3& box, const Vec3& p) {
+  double d2 = 0;
+  for (int axis = 0; axis < 3; ++axis) {
+    const double gap = std::max({box.lower[axis] - p[axis], p[axis] - box.upper[axis], 0.0});
+    d2 += gap * gap;
+  }
+  return d2;
+}
 
 // The comparison both use: true when the squared distance from p to the box (computed in double)
 // is at most distance^2, with a relative slack of 1e-12 that covers the rounding of the box

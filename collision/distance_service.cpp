@@ -469,11 +469,9 @@ struct DistanceService::Impl {
         margin = 4 * kSurfaceRounding * scale;
       }
       for (size_t k = 0; k < found; ++k) {
-        if (nearest_far < kInf) {
-          const Box3& box = bodies[s.found[k]].box;
-          const double near = (box.lower - p).cwiseMax(p - box.upper).cwiseMax(0.0).norm();
-          if (near > nearest_far * (1 + 1e-12) + margin) continue;
-        }
+        if (nearest_far < kInf &&
+            std::sqrt(squaredBoxDistance(bodies[s.found[k]].box, p)) > nearest_far * (1 + 1e-12) + margin)
+          continue;
         s.candidates.push_back(s.found[k]);
       }
       stats.pairs += s.candidates.size() - s.candidate_begin[j];

@@ -96,6 +96,9 @@ class Corners : public std::vector<std::size_t> {
 // ---------------------------------------------------------------------------------------------
 // Small parsing helpers.
 
+// The UTF-8 byte order mark some editors write at the start of a text file.
+constexpr std::string_view kUtf8Bom = "\xEF\xBB\xBF";
+
 bool isBlank(char c) { return c == ' ' || c == '\t' || c == '\r' || c == '\v' || c == '\f'; }
 
 std::vector<std::string_view> splitWords(std::string_view line) {
@@ -960,6 +963,29 @@ std::string checkAsciiStl(std::istream& in) {
   return {};
 }
 
+// How an STL file's first bytes (header and triangle count) read, as CGAL decides: ASCII first
+// when, after whitespace (from byte `from`), "solid" and a space or line end start it; as
+// binary, the count and the size it needs.
+constexpr std::uint64_t kStlHeaderBytes = 84, kStlTriangleBytes = 50;
+struct StlStart {
+  bool solid = false;
+  std::uint64_t triangles = 0;  // the binary count (0 when the file is shorter than its header)
+  std::uint64_t needed = 0;     // the size the count needs
+  bool binary_size = false;     // the file has exactly that size
+};
+StlStart readStlStart(const unsigned char* bytes, std::uint64_t got, std::uint64_t file_size, std::uint64_t from = 0) {
+  StlStart out;
+  got = std::min(got, kStlHeaderBytes);
+  std::uint64_t first = from;
+  while (first < got && std::isspace(bytes[first])) ++first;
+  out.solid = got >= first + 6 && std::memcmp(bytes + first, "solid", 5) == 0 &&
+              (bytes[first + 5] == ' ' || bytes[first + 5] == '\n' || bytes[first + 5] == '\r');
+  out.triangles = got == kStlHeaderBytes ? littleEndian32(bytes + 80) : 0;
+  out.needed = kStlHeaderBytes + kStlTriangleBytes * out.triangles;
+  out.binary_size = got == kStlHeaderBytes && out.needed == file_size;
+  return out;
+}
+
 // Decides ASCII or binary the way CGAL does and checks an ASCII file (checkAsciiStl). A binary
 // file is read here: its triangle count must match the file size exactly and its coordinates
 // be finite (CGAL merges equal points through a std::map, where NaN compares equal to
@@ -968,18 +994,12 @@ std::string checkAsciiStl(std::istream& in) {
 // vertex, numbered in order of first use, as CGAL does. Returns true when it read the file.
 bool checkStl(const std::string& path, std::istream& in, std::uint64_t file_size,
               std::vector<CgalPoint>& points, std::vector<Corners>& polygons) {
-  constexpr std::uint64_t kHeaderBytes = 84, kTriangleBytes = 50;
-  unsigned char header[kHeaderBytes] = {};
-  in.read(reinterpret_cast<char*>(header), kHeaderBytes);
+  unsigned char header[kStlHeaderBytes] = {};
+  in.read(reinterpret_cast<char*>(header), kStlHeaderBytes);
   const std::uint64_t got = static_cast<std::uint64_t>(in.gcount());
-  std::uint64_t first = 0;  // CGAL skips leading whitespace, then looks for "solid" + space/EOL
-  while (first < got && std::isspace(header[first])) ++first;
-  const bool solid = got >= first + 6 && std::memcmp(header + first, "solid", 5) == 0 &&
-                     (header[first + 5] == ' ' || header[first + 5] == '\n' ||
-                      header[first + 5] == '\r');
-  const std::uint64_t triangles = got == kHeaderBytes ? littleEndian32(header + 80) : 0;
-  const std::uint64_t needed = kHeaderBytes + kTriangleBytes * triangles;  // as binary
-  const bool binary_size = got == kHeaderBytes && needed == file_size;
+  const StlStart start = readStlStart(header, got, file_size);
+  const bool solid = start.solid, binary_size = start.binary_size;
+  const std::uint64_t triangles = start.triangles, needed = start.needed;
   if (solid && !binary_size) {
     // ASCII: CGAL grows its arrays while it reads; the structure is checked here.
     in.clear();
@@ -988,7 +1008,7 @@ bool checkStl(const std::string& path, std::istream& in, std::uint64_t file_size
     if (!problem.empty()) {
       // A binary file whose header starts with "solid " and whose size does not match its
       // count is taken for ASCII: say what it would be as binary too.
-      if (got == kHeaderBytes && needed <= file_size && triangles > 0)
+      if (got == kStlHeaderBytes && needed <= file_size && triangles > 0)
         fail(path, "not a valid ASCII STL (" + problem + "), nor a binary one: its header declares " +
                        plural(triangles, "triangle") + " (" + std::to_string(needed) + " bytes) but the file has " +
                        std::to_string(file_size - needed) + " more bytes");
@@ -996,7 +1016,7 @@ bool checkStl(const std::string& path, std::istream& in, std::uint64_t file_size
     }
     return false;
   }
-  if (got < kHeaderBytes)
+  if (got < kStlHeaderBytes)
     fail(path, "not an ASCII STL (no 'solid') and too short for a binary STL (" +
                    std::to_string(file_size) + " bytes; the binary header alone has 84)");
   if (needed > file_size)
@@ -1009,9 +1029,9 @@ bool checkStl(const std::string& path, std::istream& in, std::uint64_t file_size
                    " more bytes (a wrong triangle count?)");
   std::map<std::array<float, 3>, std::size_t> index;  // corner -> vertex
   polygons.reserve(static_cast<std::size_t>(triangles));
-  unsigned char record[kTriangleBytes];
+  unsigned char record[kStlTriangleBytes];
   for (std::uint64_t t = 0; t < triangles; ++t) {
-    if (!in.read(reinterpret_cast<char*>(record), kTriangleBytes))
+    if (!in.read(reinterpret_cast<char*>(record), kStlTriangleBytes))
       fail(path, "read error in binary STL triangle " + std::to_string(t));
     Corners corners;
     for (int c = 0; c < 3; ++c) {
@@ -1069,19 +1089,15 @@ TextRepair textRepair(const std::string& path, std::istream& in, Format format, 
   in.clear();
   in.seekg(0);
   TextRepair repair;
+  const bool bom = start.compare(0, kUtf8Bom.size(), kUtf8Bom) == 0;
   if (format == Format::kStl) {
-    // Text: 'solid' and a blank first (as checkStl decides), no zero byte (binary records
-    // nearly always hold one), and a size that is not a binary file's.
-    if (start.size() >= 84 &&
-        84 + 50 * std::uint64_t(littleEndian32(reinterpret_cast<const unsigned char*>(start.data()) + 80)) == file_size)
-      return repair;
-    const std::size_t first = start.find_first_not_of(" \t\r\n\v\f", start.compare(0, 3, "\xEF\xBB\xBF") == 0 ? 3 : 0);
-    if (first == std::string::npos || start.compare(first, 5, "solid") != 0 || first + 5 >= start.size() ||
-        (start[first + 5] != ' ' && start[first + 5] != '\n' && start[first + 5] != '\r') ||
-        start.find('\0') != std::string::npos)
-      return repair;
+    // Text: 'solid' and a blank first (as checkStl decides, after the mark), no zero byte
+    // (binary records nearly always hold one), and a size that is not a binary file's.
+    const StlStart stl = readStlStart(reinterpret_cast<const unsigned char*>(start.data()), start.size(), file_size,
+                                      bom ? kUtf8Bom.size() : 0);
+    if (stl.binary_size || !stl.solid || start.find('\0') != std::string::npos) return repair;
   }
-  repair.bom = start.compare(0, 3, "\xEF\xBB\xBF") == 0;
+  repair.bom = bom;
   repair.cr_only = start.find('\r') != std::string::npos && start.find('\n') == std::string::npos;
   // A PLY's body may be binary, where a CR is data.
   if (repair.cr_only && format == Format::kPly)
@@ -1099,7 +1115,7 @@ Mesh readMesh(const std::string& path) {
   std::istringstream repaired;
   const TextRepair repair = textRepair(path, file, format, file_size);
   if (repair.bom || repair.cr_only) {
-    file.seekg(repair.bom ? 3 : 0);
+    file.seekg(repair.bom ? static_cast<std::streamoff>(kUtf8Bom.size()) : 0);
     std::string text(std::istreambuf_iterator<char>(file), {});
     if (file.bad()) fail(path, "read error");
     // CRs alone end lines; a CRLF past the first look (a first line longer than 64 KiB) stays.
@@ -1278,7 +1294,7 @@ std::vector<Vec3> readPoints(const std::string& path) {
   if (in.peek() == 0xEF) {
     char mark[3] = {};
     in.read(mark, 3);
-    if (in.gcount() != 3 || std::memcmp(mark, "\xEF\xBB\xBF", 3) != 0)
+    if (in.gcount() != 3 || kUtf8Bom.compare(0, 3, mark, 3) != 0)
       throw MeshError(name + ":1: not a points file (starts with the byte 0xEF)");
   }
   std::vector<Vec3> points;

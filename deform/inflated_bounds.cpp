@@ -76,13 +76,11 @@ void DeformingBody::refreshInlineFaces() {
 // Positions whose bounding-box diagonal (`diagonal`) exceeds the supported mesh size (core/mesh.h) would
 // overflow the exact distance: refused like a mesh of that size.
 void DeformingBody::checkExtent(double diagonal, const char* what) const {
-  if (diagonal > kMaxMeshSize)
-  {
-    char span[32];
-    std::snprintf(span, sizeof span, "%.3g", diagonal);
-    throw std::invalid_argument(std::string("DeformingBody: the ") + what + " span " + span +
-                                " (bounding-box diagonal), beyond the supported mesh size 1e50");
-  }
+  if (!(diagonal > kMaxMeshSize)) return;
+  char span[32];
+  std::snprintf(span, sizeof span, "%.3g", diagonal);
+  throw std::invalid_argument(std::string("DeformingBody: the ") + what + " span " + span +
+                              " (bounding-box diagonal), beyond the supported mesh size 1e50");
 }
 
 void DeformingBody::checkSize(size_t count, const char* what) const {
