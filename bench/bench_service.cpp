@@ -11,6 +11,12 @@
 //   deforming: each body's vertices move along a travelling wave of amplitude 0.003 about the
 //              rest positions (setPositions, all bodies in one batch; displacement bound 0.0037,
 //              which the wave never exceeds: the bounds are inflated once and never re-anchored).
+//   carried (with --kinds=carried; not in the default run): the deforming scene carried across
+//              the world by a rigid motion, bodies and sheet together (a cloth resting on soft
+//              bodies that move): each step turns the whole scene 0.001 rad about z around its
+//              centre and moves it by (0.002, 0.001, 0). The positions the service and Embree
+//              get are world positions; the service follows the rigid part
+//              (ServiceOptions::follow_frames).
 // Query: the closest hit within 0.02 of every point (QueryMode::kClosest); with --within=D every
 // triangle within D of every point (QueryMode::kWithin; Embree: rtcPointQuery with radius D,
 // the callback keeping every triangle within D with its closest point's barycentric
@@ -38,8 +44,9 @@
 // the bodies) for 1, 4, 16, 64 bodies and 10k, 100k points.
 //
 // Flags: --quick (10k points, 1 and 4 bodies, 20 steps), --points=a,b  --bodies=a,b
-// --kinds=rigid,deforming  --threads=1,2  --steps=N  --methods=meshsweeper,embree
-// --reach=R (ServiceOptions::reach_steps)  --lead=L (ServiceOptions::lead_steps)  --within=D  --data-dir=PATH  --broadphase. Exit code 77 when a mesh is missing.
+// --kinds=rigid,deforming,carried  --threads=1,2  --steps=N  --methods=meshsweeper,embree
+// --reach=R (ServiceOptions::reach_steps)  --lead=L (ServiceOptions::lead_steps)
+// --no-frames (ServiceOptions::follow_frames off)  --within=D  --data-dir=PATH  --broadphase. Exit code 77 when a mesh is missing.
 #include "bench/bench_util.h"
 #include "collision/broadphase.h"
 #include "collision/distance_service.h"
@@ -105,6 +112,7 @@ struct Options {
   float lead_steps = ServiceOptions{}.lead_steps;
   std::string data_dir;
   bool broadphase = false;
+  bool follow_frames = true;  // ServiceOptions::follow_frames (--no-frames: off)
   double within = 0;  // > 0: QueryMode::kWithin with this distance (--within=D)
 };
 
@@ -143,7 +151,7 @@ Options parseOptions(int argc, char** argv) {
     } else if (flag == "--kinds") {
       o.kinds = splitList(value);
       for (const std::string& k : o.kinds)
-        if (k != "rigid" && k != "deforming") usageError("unknown kind '" + k + "'");
+        if (k != "rigid" && k != "deforming" && k != "carried") usageError("unknown kind '" + k + "'");
     } else if (flag == "--methods") {
       o.methods = splitList(value);
       for (const std::string& m : o.methods)
@@ -154,6 +162,8 @@ Options parseOptions(int argc, char** argv) {
       o.lead_steps = std::strtof(value.c_str(), nullptr);
     } else if (flag == "--data-dir") {
       o.data_dir = value;
+    } else if (flag == "--no-frames") {
+      o.follow_frames = false;
     } else if (flag == "--broadphase") {
       o.broadphase = true;
     } else if (flag == "--within") {
@@ -467,16 +477,29 @@ struct Scene {
   std::vector<Vec3> origins;            // [body]
   std::vector<Vec3> rest_points;        // draped sheet
   bool deforming = false;
+  bool carried = false;                 // deforming, and the whole scene carried (carry())
+  Vec3 center = Vec3::Zero();           // the bodies' grid centre
+
+  // The rigid motion that carries a carried scene at `step` (identity otherwise).
+  Eigen::Isometry3d carry(int step) const {
+    Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();
+    if (!carried) return pose;
+    pose.linear() = Eigen::AngleAxisd(0.001 * step, Vec3::UnitZ()).toRotationMatrix();
+    pose.translation() = center - pose.linear() * center + Vec3(0.002, 0.001, 0) * step;
+    return pose;
+  }
 };
 
-Scene makeScene(const std::vector<Mesh>& meshes, size_t bodies, size_t points, bool deforming) {
+Scene makeScene(const std::vector<Mesh>& meshes, size_t bodies, size_t points, const std::string& kind) {
   Scene s;
-  s.deforming = deforming;
+  s.deforming = kind != "rigid";
+  s.carried = kind == "carried";
   const int side = static_cast<int>(std::ceil(std::sqrt(static_cast<double>(bodies))));
   for (size_t b = 0; b < bodies; ++b) {
     s.mesh_index.push_back(static_cast<int>(b % meshes.size()));
     s.meshes.push_back(&meshes[b % meshes.size()]);
     s.origins.push_back(Vec3(0.9 * static_cast<double>(b % side), 0.9 * static_cast<double>(b / side), 0));
+    s.center += s.origins.back() / static_cast<double>(bodies);
   }
   // Height field of the bodies' rest vertices over the sheet's area.
   Vec3 lower = Vec3::Constant(1e300), upper = Vec3::Constant(-1e300);
@@ -521,11 +544,20 @@ Scene makeScene(const std::vector<Mesh>& meshes, size_t bodies, size_t points, b
 
 void sheetAt(const Scene& s, int step, PointMatrix& out) {
   out.resize(static_cast<Eigen::Index>(s.rest_points.size()), 3);
+  const Eigen::Isometry3d carry = s.carry(step);
   for (size_t i = 0; i < s.rest_points.size(); ++i) {
     const Vec3& p = s.rest_points[i];
-    out.row(static_cast<Eigen::Index>(i)) << p.x() + 0.0003 * step, p.y(),
-        p.z() + 0.004 * std::sin(5 * p.x() + 0.1 * step);
+    const Vec3 x(p.x() + 0.0003 * step, p.y(), p.z() + 0.004 * std::sin(5 * p.x() + 0.1 * step));
+    out.row(static_cast<Eigen::Index>(i)) = (s.carried ? Vec3(carry * x) : x).transpose();
   }
+}
+
+// A deforming body's positions at `step`: the wave, carried in a carried scene.
+void bodyPositions(const Scene& s, size_t b, int step, std::vector<Vec3>& out) {
+  wavePositions(*s.meshes[b], s.origins[b], step, out);
+  if (!s.carried) return;
+  const Eigen::Isometry3d carry = s.carry(step);
+  for (Vec3& x : out) x = carry * x;
 }
 
 // The answer of one point: the closest distance within kMaxDistance (or infinity) and its body.
@@ -553,14 +585,15 @@ struct RunResult {
 
 // Meshsweeper: the service.
 RunResult runMeshsweeper(const Scene& scene, const std::vector<std::shared_ptr<const Hierarchy>>& hierarchies,
-                         int steps, unsigned threads, float reach_steps, float lead_steps, const Query& query) {
-  DistanceService service(ServiceOptions{threads, kBlock, reach_steps, lead_steps});
+                         int steps, unsigned threads, float reach_steps, float lead_steps, bool follow_frames,
+                         const Query& query) {
+  DistanceService service(ServiceOptions{threads, kBlock, reach_steps, lead_steps, follow_frames});
   std::vector<BodyHandle> handles;
   std::vector<std::vector<Vec3>> positions(scene.meshes.size());
   for (size_t b = 0; b < scene.meshes.size(); ++b) {
     const auto& h = hierarchies[scene.mesh_index[b]];
     if (scene.deforming) {
-      wavePositions(*scene.meshes[b], scene.origins[b], 0, positions[b]);
+      bodyPositions(scene, b, 0, positions[b]);
       std::vector<Vec3> rest(scene.meshes[b]->positions.size());
       for (size_t v = 0; v < rest.size(); ++v) rest[v] = scene.meshes[b]->positions[v] + scene.origins[b];
       // The wave moves a vertex by at most 0.003 * |(0.6, 0.3, 1)| < 0.0037 from rest.
@@ -578,7 +611,7 @@ RunResult runMeshsweeper(const Scene& scene, const std::vector<std::shared_ptr<c
   for (int step = 0; step < steps; ++step) {
     sheetAt(scene, step, sheet);
     if (scene.deforming)
-      for (size_t b = 0; b < handles.size(); ++b) wavePositions(*scene.meshes[b], scene.origins[b], step, positions[b]);
+      for (size_t b = 0; b < handles.size(); ++b) bodyPositions(scene, b, step, positions[b]);
     const auto start = Clock::now();
     const double cpu0 = threadCpuSeconds();
     const double process0 = processCpuSeconds();
@@ -628,7 +661,7 @@ RunResult runEmbree(const Scene& scene, const std::vector<Mesh>& meshes, int ste
   for (size_t b = 0; b < bodies; ++b) {
     if (scene.deforming) {
       std::vector<Vec3> placed;
-      wavePositions(*scene.meshes[b], scene.origins[b], 0, placed);
+      bodyPositions(scene, b, 0, placed);
       own.push_back(std::make_unique<EmbreeScene>(device.get(), scene.meshes[b]->triangles, placed, true));
       scenes[b] = own.back().get();
     } else {
@@ -649,7 +682,7 @@ RunResult runEmbree(const Scene& scene, const std::vector<Mesh>& meshes, int ste
   for (int step = 0; step < steps; ++step) {
     sheetAt(scene, step, sheet);
     if (scene.deforming)
-      for (size_t b = 0; b < bodies; ++b) wavePositions(*scene.meshes[b], scene.origins[b], step, positions[b]);
+      for (size_t b = 0; b < bodies; ++b) bodyPositions(scene, b, step, positions[b]);
     const auto start = Clock::now();
     const double cpu0 = threadCpuSeconds();
     const double process0 = processCpuSeconds();
@@ -914,11 +947,12 @@ int main(int argc, char** argv) {
   for (const std::string& kind : options.kinds) {
     for (size_t bodies : options.bodies) {
       for (size_t points : options.points) {
-        const Scene scene = makeScene(meshes, bodies, points, kind == "deforming");
+        const Scene scene = makeScene(meshes, bodies, points, kind);
         std::vector<RunResult> results;
         for (const std::string& method : options.methods) {
           for (unsigned threads : options.threads) {
-            const RunResult r = method == "meshsweeper" ? runMeshsweeper(scene, hierarchies, options.steps, threads, options.reach_steps, options.lead_steps, query)
+            const RunResult r = method == "meshsweeper" ? runMeshsweeper(scene, hierarchies, options.steps, threads, options.reach_steps, options.lead_steps,
+                                                                         options.follow_frames, query)
                                                         : runEmbree(scene, meshes, options.steps, threads, query);
             std::printf("| %s | %zu | %zu | %s | %u | %.2f | %.2f | %.2f | %.2f | %.2f | %.1f%% | %s |\n",
                         kind.c_str(), bodies, points, method.c_str(), threads, 1e3 * median(r.wall),

@@ -10,8 +10,9 @@
 //       candidates (slot and generation) as last step; else rebuilt: a pair found last step
 //       keeps its state, a new pair starts cold, a pair not reached any more is dropped
 //     for each point p, for each candidate body b (by slot):
-//       q <- p in b's frame (rigid: the inverse pose; key-framed and deforming: p itself, the
-//            thread's stream for b reads b's current TreeGeometry)
+//       q <- p in b's frame (rigid: the inverse pose; deforming: the inverse of its followed
+//            frame, or p itself; key-framed: p itself; the thread's stream for b reads b's
+//            current TreeGeometry)
 //       closest: c <- stream.closestCoherent(q, pair state, d): the closest face within d, or
 //                none, searched no farther than d (the pair's certificate often answers
 //                without a search); keep the smallest c.distance
@@ -27,6 +28,7 @@
 #include "deform/keyframe_bounds.h"
 #include "deform/rigid_body.h"
 
+#include <Eigen/SVD>
 #include <tbb/blocked_range.h>
 #include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
@@ -118,6 +120,25 @@ struct Body {
   double orientation_last_drift = -1;  // the drift at orientation_last (-1: none)
   uint64_t orientation_last_lineage = 0;  // and its lineage
 
+  // A deforming body's followed frame (ServiceOptions::follow_frames): the rigid motion fitted
+  // to its positions, composed over the steps. The body keeps its positions in this frame
+  // (frame_inverse * world), so its drift, displacement bound and pair states see the
+  // deformation alone; queries run there, like a rigid body's. Identity (framed false) until
+  // following a motion first pays.
+  bool framed = false;
+  Eigen::Isometry3d frame = Eigen::Isometry3d::Identity();
+  Eigen::Isometry3d frame_inverse = Eigen::Isometry3d::Identity();
+  std::vector<Vec3> world_positions;  // framed: the positions as given (positions())
+  std::vector<Vec3> local_positions;  // framed: applyPositions' scratch
+  Box3 world_box;                     // framed: the box of world_positions
+
+  // The pose that places the body's frame in the world, or null where the queries run in the
+  // world (key-framed bodies, and deforming bodies not framed).
+  const Eigen::Isometry3d* pose() const {
+    if (rigid) return &rigid->pose();
+    return framed ? &frame : nullptr;
+  }
+
   // What the body's streams read: null (rest geometry, body frame) for rigid bodies.
   const TreeGeometry* geometry() const {
     if (keyframed) return &keyframed->geometry();
@@ -206,15 +227,137 @@ struct DistanceService::Impl {
     return b;
   }
 
+  // Whether a deforming body takes `positions` in a followed frame: then b.local_positions
+  // holds them in `frame` (frame^-1 * position), the body's frame or a new one. A new frame is
+  // the body's, carried by the step's rigid motion: its rotation fitted by least squares to a
+  // sample of vertices (Kabsch), its translation the centre of the box of what the rotation
+  // leaves (which halves the largest motion of a shift, where least squares follows every
+  // wobble of the deformation). It is taken when it cuts the largest vertex motion the body
+  // sees this step by a quarter or more, every vertex checked: a poor fit is never taken.
+  // False for a body not framed that no frame helps, and for positions
+  // DeformingBody::setPositions refuses (it reports them).
+  bool followFrame(Body& b, const std::vector<Vec3>& positions, Eigen::Isometry3d& frame) {
+    const std::vector<Vec3>& last = b.deforming->positions();  // in b.frame
+    const size_t n = positions.size();
+    if (n != last.size() || n == 0) return false;
+    bool valid = true;
+    for (const Vec3& x : positions) valid &= inCoordinateRange(x);
+    if (!valid) return false;
+    const std::vector<Vec3>& last_world = b.framed ? b.world_positions : last;  // as given last
+
+    // The rotation, from a sample spread over the vertices.
+    constexpr size_t kSample = 64;
+    const size_t count = std::min(n, kSample);
+    auto sampled = [&](size_t i) { return i * n / count; };
+    Vec3 from[kSample], to[kSample];
+    Vec3 from_mean = Vec3::Zero(), to_mean = Vec3::Zero();
+    for (size_t i = 0; i < count; ++i) {
+      from[i] = last_world[sampled(i)];
+      to[i] = positions[sampled(i)];
+      from_mean += from[i];
+      to_mean += to[i];
+    }
+    from_mean /= static_cast<double>(count);
+    to_mean /= static_cast<double>(count);
+    Eigen::Matrix3d covariance = Eigen::Matrix3d::Zero();
+    for (size_t i = 0; i < count; ++i) covariance += (from[i] - from_mean) * (to[i] - to_mean).transpose();
+    const Eigen::JacobiSVD<Eigen::Matrix3d> svd(covariance, Eigen::ComputeFullU | Eigen::ComputeFullV);
+    Eigen::Matrix3d flip = Eigen::Matrix3d::Identity();
+    flip(2, 2) = (svd.matrixV() * svd.matrixU().transpose()).determinant() < 0 ? -1 : 1;
+    Eigen::Quaterniond turn(Eigen::Matrix3d(svd.matrixV() * flip * svd.matrixU().transpose()));
+    if (!turn.coeffs().allFinite()) return keepFrame(b, positions, frame);
+    turn.normalize();
+    const Eigen::Matrix3d rotation = turn.toRotationMatrix();
+
+    // What the rotation leaves: its box's centre is the shift; the largest remainder, the
+    // motion left. On the sample first (promising?), then on every vertex.
+    constexpr double kGain2 = 0.75 * 0.75;  // a quarter less motion, squared
+    auto leftover = [&](bool every, Vec3& shift, double& kept2) {
+      Vec3 lower = Vec3::Constant(kInf), upper = Vec3::Constant(-kInf);
+      kept2 = 0;
+      for (size_t k = 0, end = every ? n : count; k < end; ++k) {
+        const size_t v = every ? k : sampled(k);
+        const Vec3& from_v = last_world[v];
+        const Vec3 r = positions[v] - rotation * from_v;
+        lower = lower.cwiseMin(r);
+        upper = upper.cwiseMax(r);
+        kept2 = std::max(kept2, (positions[v] - from_v).squaredNorm());
+      }
+      shift = 0.5 * (lower + upper);
+      return (0.5 * (upper - lower)).squaredNorm();  // bounds the largest remainder, squared
+    };
+    Vec3 shift;
+    double kept2 = 0;
+    if (!(leftover(count == n, shift, kept2) < kGain2 * kept2)) return keepFrame(b, positions, frame);
+    if (count < n && !(leftover(true, shift, kept2) < kGain2 * kept2)) return keepFrame(b, positions, frame);
+    Eigen::Isometry3d step = Eigen::Isometry3d::Identity();
+    step.linear() = rotation;
+    step.translation() = shift;
+    Eigen::Isometry3d carried = step * b.frame;
+    Eigen::Quaterniond orientation(carried.linear());
+    orientation.normalize();
+    carried.linear() = orientation.toRotationMatrix();
+    if (!carried.matrix().allFinite()) return keepFrame(b, positions, frame);
+    const Eigen::Isometry3d inverse = carried.inverse(Eigen::Isometry);
+    std::vector<Vec3>& local = b.local_positions;
+    local.resize(n);
+    double moved2 = 0;
+    for (size_t v = 0; v < n; ++v) {
+      local[v] = inverse * positions[v];
+      moved2 = std::max(moved2, (local[v] - last[v]).squaredNorm());
+    }
+    if (!(moved2 < kGain2 * kept2)) return keepFrame(b, positions, frame);
+    frame = carried;
+    return true;
+  }
+
+  // followFrame() without a new frame: the positions in the body's frame, if it has one.
+  static bool keepFrame(Body& b, const std::vector<Vec3>& positions, Eigen::Isometry3d& frame) {
+    if (!b.framed) return false;
+    frame = b.frame;
+    b.local_positions.resize(positions.size());
+    for (size_t v = 0; v < positions.size(); ++v) b.local_positions[v] = b.frame_inverse * positions[v];
+    return true;
+  }
+
+  // The world box of a framed body at `positions`, with a margin for the rounding between
+  // them and the body's positions in its frame, placed by it (where the queries run).
+  static Box3 framedBox(const std::vector<Vec3>& positions, const Eigen::Isometry3d& frame) {
+    Box3 box;
+    box.lower = Vec3::Constant(kInf);
+    box.upper = Vec3::Constant(-kInf);
+    for (const Vec3& x : positions) {
+      box.lower = box.lower.cwiseMin(x);
+      box.upper = box.upper.cwiseMax(x);
+    }
+    const double extent = box.lower.cwiseAbs().cwiseMax(box.upper.cwiseAbs()).maxCoeff() +
+                          frame.translation().cwiseAbs().maxCoeff();
+    box.lower.array() -= 1e-12 * extent;
+    box.upper.array() += 1e-12 * extent;
+    return box;
+  }
+
   // A deforming body's new positions (checked by DeformingBody::setPositions: a wrong count or
   // a non-finite coordinate throws, the body unchanged), re-anchored past its bound.
   PositionsUpdate applyPositions(Body& b, const std::vector<Vec3>& positions) {
-    const DisplacementCheck check = b.deforming->setPositions(positions);
+    // In the followed frame, when there is one (followFrame); the frame changes only once the
+    // body has accepted the positions.
+    Eigen::Isometry3d frame = b.frame;
+    const bool framed = options.follow_frames && followFrame(b, positions, frame);
+    const std::vector<Vec3>& local = framed ? b.local_positions : positions;
+    const DisplacementCheck check = b.deforming->setPositions(local);
     PositionsUpdate update;
+    if (framed) {  // accepted, or anchored below: either way the body is in `frame` now
+      b.framed = true;
+      b.frame = frame;
+      b.frame_inverse = frame.inverse(Eigen::Isometry);
+      b.world_positions = positions;
+      b.world_box = framedBox(positions, frame);
+    }
     if (!check.accepted) {
-      b.deforming->anchor(positions);
+      b.deforming->reanchor(local);
       b.deforming->inflate(b.displacement_bound);
-      anchorOrientation(b, positions);
+      anchorOrientation(b, local);
       update.reanchored = true;
       update.worst_vertex = check.worst_vertex;
       update.excess = check.excess;
@@ -317,12 +460,17 @@ struct DistanceService::Impl {
       box.lower.array() -= margin;
       box.upper.array() += margin;
     } else {
+      // A framed body's orientation is its positions' in its frame (a rotation keeps a volume).
       const std::vector<Vec3>& pos = b.keyframed ? b.keyframed->positions() : b.deforming->positions();
-      box.lower = Vec3::Constant(kInf);
-      box.upper = Vec3::Constant(-kInf);
-      for (const Vec3& x : pos) {
-        box.lower = box.lower.cwiseMin(x);
-        box.upper = box.upper.cwiseMax(x);
+      if (b.framed) {
+        box = b.world_box;
+      } else {
+        box.lower = Vec3::Constant(kInf);
+        box.upper = Vec3::Constant(-kInf);
+        for (const Vec3& x : pos) {
+          box.lower = box.lower.cwiseMin(x);
+          box.upper = box.upper.cwiseMax(x);
+        }
       }
       if (b.shape->closed()) b.orientation = placementOrientation(b, pos);
     }
@@ -371,8 +519,8 @@ struct DistanceService::Impl {
   double surfaceRounding(uint32_t slot, const Vec3& p, const Vec3& q) const {
     const Body& b = bodies[slot];
     double scale = q.cwiseAbs().maxCoeff();
-    if (b.kind == BodyKind::kRigid)
-      scale += p.cwiseAbs().maxCoeff() + b.rigid->pose().translation().cwiseAbs().maxCoeff();
+    if (const Eigen::Isometry3d* pose = b.pose())
+      scale += p.cwiseAbs().maxCoeff() + pose->translation().cwiseAbs().maxCoeff();
     return kSurfaceRounding * scale;
   }
 
@@ -415,9 +563,9 @@ struct DistanceService::Impl {
     else
       hit.sign = !on_surface && offset.dot(normal) < 0 ? HitSign::kInside : HitSign::kOutside;
     hit.signed_distance = hit.sign == HitSign::kInside ? -distance : distance;
-    if (b.kind == BodyKind::kRigid) {
-      hit.point = b.rigid->toWorld(c);
-      hit.direction = b.rigid->pose().linear() * direction;
+    if (const Eigen::Isometry3d* pose = b.pose()) {
+      hit.point = *pose * c;
+      hit.direction = pose->linear() * direction;
     } else {
       hit.point = c;
       hit.direction = direction;
@@ -427,7 +575,8 @@ struct DistanceService::Impl {
 
   Vec3 toBody(uint32_t slot, const Vec3& p) const {
     const Body& b = bodies[slot];
-    return b.kind == BodyKind::kRigid ? b.rigid->toBody(p) : p;
+    if (b.rigid) return b.rigid->toBody(p);
+    return b.framed ? b.frame_inverse * p : p;
   }
 
   // The broadphase of one block: candidate lists in s.candidates (point j's from
@@ -463,7 +612,7 @@ struct DistanceService::Impl {
           const Body& b = bodies[s.found[k]];
           nearest_far = std::min(nearest_far, (p - b.box.lower).cwiseAbs().cwiseMax((p - b.box.upper).cwiseAbs()).norm());
           double body_scale = b.box.lower.cwiseAbs().cwiseMax(b.box.upper.cwiseAbs()).maxCoeff();
-          if (b.kind == BodyKind::kRigid) body_scale += b.rigid->pose().translation().cwiseAbs().maxCoeff();
+          if (const Eigen::Isometry3d* pose = b.pose()) body_scale += pose->translation().cwiseAbs().maxCoeff();
           scale = std::max(scale, body_scale);
         }
         margin = 4 * kSurfaceRounding * scale;
@@ -787,6 +936,11 @@ const Eigen::Isometry3d& DistanceService::pose(BodyHandle body) const {
   return impl_->body(body, "pose", BodyKind::kRigid).rigid->pose();
 }
 
+Eigen::Isometry3d DistanceService::frame(BodyHandle body) const {
+  const Eigen::Isometry3d* pose = impl_->body(body, "frame").pose();
+  return pose ? *pose : Eigen::Isometry3d::Identity();
+}
+
 void DistanceService::setTime(BodyHandle body, double t) {
   Body& b = impl_->body(body, "setTime", BodyKind::kKeyframed);
   if (!std::isfinite(t)) throw std::invalid_argument("DistanceService::setTime: time is not finite");
@@ -873,7 +1027,7 @@ bool DistanceService::inlineFaces(BodyHandle body) const {
 const std::vector<Vec3>& DistanceService::positions(BodyHandle body) const {
   Body& b = impl_->body(body, "positions");
   if (b.keyframed) return b.keyframed->positions();
-  if (b.deforming) return b.deforming->positions();
+  if (b.deforming) return b.framed ? b.world_positions : b.deforming->positions();
   throw std::invalid_argument("DistanceService::positions: body " + std::to_string(body.index) +
                               " is rigid (its positions are the mesh's, placed by its pose)");
 }

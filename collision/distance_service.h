@@ -189,6 +189,15 @@ struct ServiceOptions {
   // velocity (when that is within 2 R): on a steady path the set lasts about twice as long
   // (CoherentState::lead_steps; 0: gathered at the point). Answers never depend on it.
   float lead_steps = 3;
+  // A deforming body's rigid motion is followed (frame()): each setPositions() fits the rigid
+  // motion that best carries the last positions onto the new ones and keeps it when that at
+  // least halves the largest vertex motion left. The body then holds its positions in that
+  // frame and is queried there, like a rigid body: a soft body carried across the world (with
+  // the points near it) keeps its coherent states and its displacement bound, where in world
+  // coordinates every step's carry would count as deformation (bench_service's carried sheets:
+  // 5-8x slower a step without it, bench/README.md). Answers agree either way up to rounding
+  // (the frame's transform, as for a rigid body's pose).
+  bool follow_frames = true;
 };
 
 class DistanceService {
@@ -222,8 +231,10 @@ class DistanceService {
                           std::vector<std::vector<Vec3>> frames, double time = 0);
   // A freely deforming body starting at `positions` (empty: the mesh's positions), whose
   // vertices may each move up to `displacement_bound` (>= 0, finite; world units) from where
-  // the bounds were last computed before setPositions() re-anchors (see PositionsUpdate).
-  // A bound of a few steps' motion keeps re-anchoring rare.
+  // the bounds were last computed before setPositions() re-anchors (see PositionsUpdate),
+  // measured in the body's followed frame (ServiceOptions::follow_frames): a rigid motion of
+  // the whole body does not use the bound up. A bound of a few steps' deformation keeps
+  // re-anchoring rare.
   BodyHandle addDeforming(std::shared_ptr<const Hierarchy> hierarchy, double displacement_bound,
                           const std::vector<Vec3>& positions = {});
 
@@ -242,6 +253,10 @@ class DistanceService {
   // kRigid.
   void setPose(BodyHandle body, const Eigen::Isometry3d& pose);
   const Eigen::Isometry3d& pose(BodyHandle body) const;
+  // The frame the body's queries run in, placed in the world: a rigid body's pose; a deforming
+  // body's followed rigid motion (ServiceOptions::follow_frames; identity until one is
+  // followed); identity for a key-framed body.
+  Eigen::Isometry3d frame(BodyHandle body) const;
   // kKeyframed: t in [0, frames - 1] (clamped; std::invalid_argument if not finite).
   void setTime(BodyHandle body, double t);
   // kDeforming: one position per mesh vertex (std::invalid_argument on a wrong count or a

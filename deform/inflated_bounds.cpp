@@ -110,6 +110,17 @@ void DeformingBody::anchor(const std::vector<Vec3>& positions) {
   geometry_.lineage = geometry_.version;  // positions replaced: coherent state starts over
 }
 
+void DeformingBody::reanchor(const std::vector<Vec3>& positions) {
+  checkSize(positions.size(), "anchor positions");
+  double moved2 = 0;
+  for (size_t v = 0; v < positions.size(); ++v) moved2 = std::max(moved2, (positions[v] - positions_[v]).squaredNorm());
+  const uint64_t lineage = geometry_.lineage;
+  const double drift = geometry_.drift;
+  anchor(positions);  // checks the positions; throws with the body unchanged
+  geometry_.lineage = lineage;
+  geometry_.drift = grownDrift(drift, std::sqrt(moved2));
+}
+
 void DeformingBody::inflate(double delta) { inflate(std::vector<double>(positions_.size(), delta)); }
 
 void DeformingBody::inflate(const std::vector<double>& delta) {

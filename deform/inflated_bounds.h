@@ -32,6 +32,11 @@ class DeformingBody {
   // std::invalid_argument) and makes them the anchor and the current positions; displacement
   // bounds reset to zero. Costs the build's radius phase.
   void anchor(const std::vector<Vec3>& positions);
+  // The same for positions that continue the current ones (a step that broke a displacement
+  // bound): the geometry's lineage is kept and its drift grows by how far the farthest vertex
+  // moved, so coherent query state survives (TreeGeometry::lineage). anchor() starts a new
+  // lineage (the positions may have jumped anywhere).
+  void reanchor(const std::vector<Vec3>& positions);
 
   // Every vertex v may move up to delta[v] (>= 0, finite) from the anchor positions: inflates all
   // bounds in one bottom-up pass. Current positions outside the new bounds are reset to the

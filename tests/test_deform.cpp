@@ -649,6 +649,60 @@ TEST_CASE("deforming bodies: a large drift still counts small motions", "[deform
   CHECK(f.checks() == 1501);
 }
 
+// reanchor() keeps the lineage: coherent states survive a step that broke the displacement
+// bound, certified where the drift's growth (the farthest vertex's motion) allows, exact
+// everywhere; even a jump (a mirror image) is only a large drift.
+TEST_CASE("deforming bodies: reanchor continues the lineage", "[deform]") {
+  const Mesh mesh = scenes::icosphere(3, 1.0);
+  const auto h = Hierarchy::build(mesh);
+  DeformingBody body(h);
+  body.inflate(0.004);
+  QueryStream stream(h);
+  stream.setGeometry(&body.geometry());
+  Random random(5);
+  std::vector<Vec3> points;
+  for (int i = 0; i < 200; ++i) points.push_back(random.inBox(Vec3(-1.3, -1.3, -1.3), Vec3(1.3, 1.3, 1.3)));
+  std::vector<CoherentState> states(points.size());
+  Failures f("closestCoherent across re-anchors");
+  size_t reanchors = 0, certified_after = 0;
+  for (int step = 1; step <= 24; ++step) {
+    std::vector<Vec3> x = mesh.positions;
+    for (Vec3& v : x) v *= 1 + 0.01 * std::sin(3 * v.x() + 0.15 * step);  // steps of 0.0015 at most
+    if (step == 20)
+      for (Vec3& v : x) v.x() = -v.x();  // a jump
+    const uint64_t lineage = body.geometry().lineage;
+    const double drift = body.geometry().drift;
+    const bool reanchored = !body.setPositions(x).accepted;
+    if (reanchored) {
+      double moved = 0;
+      for (size_t v = 0; v < x.size(); ++v) moved = std::max(moved, (x[v] - body.positions()[v]).norm());
+      body.reanchor(x);
+      body.inflate(0.004);
+      ++reanchors;
+      CHECK(body.geometry().lineage == lineage);
+      CHECK(body.geometry().drift >= drift + moved);
+      CHECK(body.positions() == x);
+    }
+    const Mesh current = withPositions(mesh, x);
+    for (size_t i = 0; i < points.size(); ++i) {
+      bool certified = false;
+      const ClosestPoint c = stream.closestCoherent(points[i], states[i], &certified);
+      if (reanchored && step != 20) certified_after += certified;
+      const BruteHit truth = bruteForceClosest(current, points[i]);
+      f.check(std::abs(c.distance - truth.distance) <= 1e-12 * truth.distance, [&] {
+        return "step " + std::to_string(step) + ": " + num(c.distance) + ", brute force " + num(truth.distance);
+      });
+    }
+  }
+  CHECK(reanchors >= 3);
+  CHECK(certified_after > 0);  // sets from before a re-anchor still answered
+  CHECK(f.checks() == 24 * points.size());
+  // anchor() starts a new lineage.
+  const uint64_t lineage = body.geometry().lineage;
+  body.anchor(mesh.positions);
+  CHECK(body.geometry().lineage != lineage);
+}
+
 // withinCoherent with an infinite radius answers by a plain search; the set it did not use must
 // not survive into a new lineage (found by review: after a re-anchoring and one such step, the
 // previous lineage's set answered "no face" for a point with six faces within d).

@@ -1284,3 +1284,107 @@ TEST_CASE("a setPositions that throws changes nothing, inline faces included", "
   CHECK(service.inlineFaces(body));
   CHECK(service.positions(body) == sphere.positions);
 }
+
+// A deforming body carried across the world by a rigid motion, with points that travel along:
+// the service follows the motion (frame()) and keeps the deformation alone in the body's
+// drift and displacement bound. Answers equal brute force over the world positions either way;
+// without the frame every step's carry broke the bound (a re-anchor) and counted as motion
+// toward the points, so few pairs stayed certified.
+TEST_CASE("a deforming body carried by a rigid motion: the service follows its frame", "[service]") {
+  const Mesh torus = scenes::torus(1.0, 0.3, 32, 16);
+  const Vec3 center = Vec3::Zero();
+  auto carry = [](int s) { return makePose(0.03 * s, Vec3(1, 2, 3), Vec3(0.15 * s, -0.05 * s, 0.02 * s)); };
+  auto local = [&](int s) { return wave(torus.positions, center, 0.01, 0.2 * s); };
+
+  Twin twin;  // follows frames (the default)
+  ServiceOptions plain_options{1, 32};
+  plain_options.follow_frames = false;
+  DistanceService plain(plain_options);
+  const auto h = twin.one.hierarchyFor(torus);
+  // The deformation stays within 0.05 of its start (0.01 of the size, twice, and the twist).
+  const BodyHandle body = twin.addDeforming(h, 0.05, transformed(local(0), carry(0)));
+  const BodyHandle plain_body = plain.addDeforming(plain.hierarchyFor(torus), 0.05, transformed(local(0), carry(0)));
+  // A body that deforms in place: no rigid motion to follow, its frame stays the identity.
+  const Mesh sphere = scenes::icosphere(2, 0.5, Vec3(0, 0, 4));
+  const BodyHandle still = twin.addDeforming(twin.one.hierarchyFor(sphere), 0.03, sphere.positions);
+
+  // Points near the torus, in its frame, drifting slowly there; placed by the carry.
+  Random random(11);
+  const size_t n = 600;
+  std::vector<Vec3> in_frame(n), velocity(n), points(n);
+  for (size_t i = 0; i < n; ++i) {
+    in_frame[i] = random.inBox(Vec3(-1.5, -1.5, -0.5), Vec3(1.5, 1.5, 0.5));
+    velocity[i] = 0.002 * Vec3(random.uniform(-1, 1), random.uniform(-1, 1), random.uniform(-1, 1));
+  }
+  Failures closest("closest vs brute force"), within("within vs brute force"), identical("1 vs 2 threads"),
+      signs("sign vs winding number");
+  StepResult r1, r2, r_plain;
+  uint64_t pairs = 0, certified = 0, plain_pairs = 0, plain_certified = 0;
+  size_t reanchored = 0, plain_reanchored = 0;
+  const double d = 0.25;
+  const int steps = 14;
+  for (int s = 1; s <= steps; ++s) {
+    INFO("step " << s);
+    const std::vector<Vec3> world = transformed(local(s), carry(s));
+    reanchored += twin.setPositions(body, world).reanchored;
+    plain_reanchored += plain.setPositions(plain_body, world).reanchored;
+    twin.setPositions(still, wave(sphere.positions, Vec3(0, 0, 4), 0.02, 0.3 * s, 0.5));
+    CHECK(twin.one.positions(body) == world);  // the world positions as given
+    for (size_t i = 0; i < n; ++i) {
+      in_frame[i] += velocity[i];
+      points[i] = carry(s) * in_frame[i];
+    }
+    const PointMatrix matrix = toMatrix(points);
+    twin.one.step(matrix, d, QueryMode::kClosest, r1);
+    twin.two.step(matrix, d, QueryMode::kClosest, r2);
+    plain.step(matrix, d, QueryMode::kClosest, r_plain);
+    checkIdentical(r1, r2, identical);
+    checkStep(twin, points, d, QueryMode::kClosest, r1, closest);
+    for (size_t i = 0; i < n; ++i) {
+      const DistanceHit* hit = r1.closest(i);
+      const DistanceHit* other = r_plain.closest(i);
+      closest.check((hit == nullptr) == (other == nullptr) &&
+                        (!hit || std::abs(hit->distance - other->distance) <= kTolerance),
+                    [&] { return "point " + std::to_string(i) + ": framed and plain answers differ"; });
+      if (hit && hit->body == body && hit->distance > 1e-6) {
+        const bool inside = windingNumber(twin.bodies.at(body.index).world, points[i]) > 0.5;
+        signs.check(inside == (hit->sign == HitSign::kInside), [&] { return "point " + text(points[i]) + ": wrong sign"; });
+      }
+    }
+    if (s > 2) {  // once the states are warm
+      pairs += r1.stats().pairs;
+      certified += r1.stats().certified_pairs;
+      plain_pairs += r_plain.stats().pairs;
+      plain_certified += r_plain.stats().certified_pairs;
+    }
+    twin.one.step(matrix, d, QueryMode::kWithin, r1);
+    twin.two.step(matrix, d, QueryMode::kWithin, r2);
+    checkIdentical(r1, r2, identical);
+    checkStep(twin, points, d, QueryMode::kWithin, r1, within);
+  }
+  // The frame follows the carry (up to what the deformation's fit adds).
+  const Eigen::Isometry3d frame = twin.one.frame(body);
+  CHECK((frame.translation() - carry(steps).translation()).norm() < 0.02);
+  CHECK(Eigen::AngleAxisd(frame.linear().transpose() * carry(steps).linear()).angle() < 0.02);
+  CHECK(twin.one.frame(still).matrix() == Eigen::Matrix4d::Identity());
+  CHECK(plain.frame(plain_body).matrix() == Eigen::Matrix4d::Identity());
+  // In its frame the body stays within its bound and its pairs within their certificates.
+  CHECK(reanchored == 0);
+  CHECK(plain_reanchored >= steps - 2);
+  INFO("certified " << certified << " of " << pairs << "; plain " << plain_certified << " of " << plain_pairs);
+  CHECK(certified > 0.6 * static_cast<double>(pairs));
+  CHECK(certified > 3 * plain_certified);
+  CHECK(closest.checks() > 5000);
+  CHECK(within.checks() > 5000);
+  CHECK(signs.checks() > 1000);
+
+  // A setPositions that throws leaves the framed body as it was.
+  const Eigen::Isometry3d before = twin.one.frame(body);
+  std::vector<Vec3> bad = transformed(local(steps + 1), carry(steps + 1));
+  bad[5].y() = std::numeric_limits<double>::quiet_NaN();
+  CHECK_THROWS_WITH(twin.one.setPositions(body, bad), Catch::Contains("not finite"));
+  bad[5].y() = 1e160;
+  CHECK_THROWS_WITH(twin.one.setPositions(body, bad), Catch::Contains("beyond 1e150"));
+  CHECK(twin.one.frame(body).matrix() == before.matrix());
+  CHECK(twin.one.positions(body) == transformed(local(steps), carry(steps)));
+}
