@@ -888,6 +888,7 @@ BodyHandle DistanceService::addDeforming(std::shared_ptr<const Hierarchy> hierar
   b.kind = BodyKind::kDeforming;
   b.shape = shapeFor(hierarchy);
   b.deforming = std::make_unique<DeformingBody>(std::move(hierarchy));
+  b.deforming->setRadii(false);  // the service's queries read boxes only: anchors skip the radius phase
   if (!positions.empty()) b.deforming->anchor(positions);
   b.deforming->inflate(displacement_bound);
   b.displacement_bound = displacement_bound;

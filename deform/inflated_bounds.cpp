@@ -8,6 +8,7 @@
 
 #include <algorithm>
 #include <cstdio>
+#include <iterator>
 #include <cmath>
 #include <limits>
 #include <stdexcept>
@@ -99,7 +100,9 @@ void DeformingBody::anchor(const std::vector<Vec3>& positions) {
   anchor_positions_ = positions;
   positions_ = positions;
   anchor_nodes_ = hierarchy_->nodes();
-  refitBounds(*hierarchy_, anchor_positions_.data(), anchor_nodes_, true);
+  refitBounds(*hierarchy_, anchor_positions_.data(), anchor_nodes_, radii_);
+  if (!radii_)  // no radius phase: every radius unbounded (valid, it prunes nothing)
+    for (Node8& n : anchor_nodes_) std::fill(std::begin(n.eps), std::end(n.eps), std::numeric_limits<float>::infinity());
   anchor_extent_ = boxExtent(anchor_nodes_);
   extent_bound_ = anchor_extent_;
   inflated_nodes_ = anchor_nodes_;

@@ -50,6 +50,15 @@ class DeformingBody {
   // size or non-finite positions.
   DisplacementCheck setPositions(const std::vector<Vec3>& positions);
 
+  // Radii: whether anchor() computes every slot's swept-sphere radius (eps, the hierarchy
+  // build's radius phase: most of an anchor's cost, 6 ms on a 52k-face body). Off, anchor()
+  // sets them unbounded: box queries (closest, within, the coherent ones) are unchanged, and
+  // the priority queries (closestWithin, kClosest, the dynamic front) stay exact without the
+  // radii's pruning. For a body only box queries read, as the distance service's. On by
+  // default; takes effect at the next anchor().
+  void setRadii(bool on) { radii_ = on; }
+  bool radii() const { return radii_; }
+
   // Inline faces: keep a copy of every leaf block's faces at the current positions, as the
   // rigid hierarchy has (Hierarchy::leafBlocks()), so a query tests a leaf without gathering
   // its corners, and refit the boxes to them (tighter than the inflated ones: fewer leaves
@@ -81,6 +90,7 @@ class DeformingBody {
   std::vector<double> subtree_, corners_;  // inflate()'s per-slot displacements (reused)
   LeafVertices leaf_vertices_;             // built by the first inflate()
   std::vector<TriangleBlock8> leaf_blocks_;  // [leaf] faces at positions_ (setInlineFaces)
+  bool radii_ = true;                        // anchor() computes eps (setRadii)
   void refreshInlineFaces();
   TreeGeometry geometry_;
 };

@@ -851,6 +851,51 @@ TEST_CASE("inflated bounds: displacements within the bounds are exact, others re
   checkInflated(scenes::randomSoup(2000, 10), 30, 200, 0xbeef05, true);
 }
 
+// Without radii (setRadii(false), as the distance service's bodies): an anchor skips the radius
+// phase and leaves every slot's radius unbounded; every query kind stays exact, and the bounds
+// still validate.
+TEST_CASE("inflated bounds without radii: anchors skip the radius phase, queries stay exact", "[deform][inflated]") {
+  for (const Mesh& mesh : {scenes::torus(1.0, 0.3, 64, 32), scenes::randomSoup(1500, 12)}) {
+    INFO("mesh " << mesh.name);
+    const auto h = Hierarchy::build(mesh);
+    const double diagonal = meshDiagonal(mesh);
+    DeformingBody body(h);
+    CHECK(body.radii());
+    body.setRadii(false);
+    CHECK_FALSE(body.radii());
+    const std::vector<Vec3> moved = add(mesh.positions, displacement(mesh, 0.05 * diagonal, 0.3));
+    body.anchor(moved);
+    size_t slots = 0, unbounded = 0;
+    for (size_t i = 0; i < h->nodes().size(); ++i)
+      for (int k = 0; k < 8; ++k) {
+        const Node8& n = body.geometry().nodes[i];
+        if (n.child[k] == kEmptyChild) continue;
+        ++slots;
+        unbounded += std::isinf(n.eps[k]) && n.eps[k] > 0;
+      }
+    CHECK(slots > 0);
+    CHECK(unbounded == slots);
+    body.inflate(0.01 * diagonal);
+    CHECK(body.setPositions(add(moved, displacement(mesh, 0.009 * diagonal, 1.1))).accepted);
+    QueryChecks checks;
+    Failures bounds("validateGeometry");
+    checkBody(mesh, h, body, 40, 0xbeef21, checks, bounds);
+    body.setInlineFaces(true);
+    checkBody(mesh, h, body, 40, 0xbeef22, checks, bounds);
+    // Radii on again: the next anchor computes them (finite).
+    body.setRadii(true);
+    body.anchor(moved);
+    size_t finite = 0;
+    for (size_t i = 0; i < h->nodes().size(); ++i)
+      for (int k = 0; k < 8; ++k)
+        finite += body.geometry().nodes[i].child[k] != kEmptyChild && std::isfinite(body.geometry().nodes[i].eps[k]);
+    CHECK(finite == slots);
+    checkBody(mesh, h, body, 40, 0xbeef23, checks, bounds);
+    CHECK(checks.anytime.checks() > 100);
+    CHECK(checks.k.checks() > 100);
+  }
+}
+
 TEST_CASE("inflated bounds: bad input throws and changes nothing", "[deform][inflated]") {
   const Mesh mesh = scenes::icosphere(2);
   const auto h = Hierarchy::build(mesh);
