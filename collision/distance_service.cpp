@@ -227,97 +227,141 @@ struct DistanceService::Impl {
     return b;
   }
 
-  // Whether a deforming body takes `positions` in a followed frame: then b.local_positions
-  // holds them in `frame` (frame^-1 * position), the body's frame or a new one. A new frame is
-  // the body's, carried by the step's rigid motion: its rotation fitted by least squares to a
-  // sample of vertices (Kabsch), its translation the centre of the box of what the rotation
-  // leaves (which halves the largest motion of a shift, where least squares follows every
-  // wobble of the deformation). It is taken when it cuts the largest vertex motion the body
-  // sees this step by a quarter or more, every vertex checked: a poor fit is never taken.
-  // False for a body not framed that no frame helps, and for positions
-  // DeformingBody::setPositions refuses (it reports them).
-  bool followFrame(Body& b, const std::vector<Vec3>& positions, Eigen::Isometry3d& frame) {
-    const std::vector<Vec3>& last = b.deforming->positions();  // in b.frame
-    const size_t n = positions.size();
-    if (n != last.size() || n == 0) return false;
-    bool valid = true;
-    for (const Vec3& x : positions) valid &= inCoordinateRange(x);
-    if (!valid) return false;
-    const std::vector<Vec3>& last_world = b.framed ? b.world_positions : last;  // as given last
-
-    // The rotation, from a sample spread over the vertices.
-    constexpr size_t kSample = 64;
-    const size_t count = std::min(n, kSample);
-    auto sampled = [&](size_t i) { return i * n / count; };
-    Vec3 from[kSample], to[kSample];
+  // ---- Followed frames (ServiceOptions::follow_frames) -----------------------------------
+  // A rigid motion fitted to carry `from` onto `to` (as many, in range): the rotation by least
+  // squares over a sample of kFitSample vertices spread over them (Kabsch), the shift the centre
+  // of the box of what the rotation leaves (which halves the largest motion of a shift, where
+  // least squares follows every wobble of a deformation). `left2` bounds the largest remainder
+  // (the box's half diagonal), `moved2` is the largest |to - from|, both squared, over the
+  // sample or every vertex (measure()).
+  static constexpr size_t kFitSample = 64;
+  struct MotionFit {
+    Eigen::Matrix3d rotation = Eigen::Matrix3d::Identity();
+    Vec3 shift = Vec3::Zero();
+    double left2 = 0, moved2 = 0;
+    Eigen::Isometry3d motion() const {
+      Eigen::Isometry3d m = Eigen::Isometry3d::Identity();
+      m.linear() = rotation;
+      m.translation() = shift;
+      return m;
+    }
+  };
+  static size_t sampled(size_t i, size_t n) { return i * n / std::min(n, kFitSample); }
+  // The rotation; false when it is not finite.
+  static bool fitRotation(const std::vector<Vec3>& from, const std::vector<Vec3>& to, MotionFit& fit) {
+    const size_t n = from.size(), count = std::min(n, kFitSample);
     Vec3 from_mean = Vec3::Zero(), to_mean = Vec3::Zero();
     for (size_t i = 0; i < count; ++i) {
-      from[i] = last_world[sampled(i)];
-      to[i] = positions[sampled(i)];
-      from_mean += from[i];
-      to_mean += to[i];
+      from_mean += from[sampled(i, n)];
+      to_mean += to[sampled(i, n)];
     }
     from_mean /= static_cast<double>(count);
     to_mean /= static_cast<double>(count);
     Eigen::Matrix3d covariance = Eigen::Matrix3d::Zero();
-    for (size_t i = 0; i < count; ++i) covariance += (from[i] - from_mean) * (to[i] - to_mean).transpose();
+    for (size_t i = 0; i < count; ++i)
+      covariance += (from[sampled(i, n)] - from_mean) * (to[sampled(i, n)] - to_mean).transpose();
     const Eigen::JacobiSVD<Eigen::Matrix3d> svd(covariance, Eigen::ComputeFullU | Eigen::ComputeFullV);
     Eigen::Matrix3d flip = Eigen::Matrix3d::Identity();
     flip(2, 2) = (svd.matrixV() * svd.matrixU().transpose()).determinant() < 0 ? -1 : 1;
     Eigen::Quaterniond turn(Eigen::Matrix3d(svd.matrixV() * flip * svd.matrixU().transpose()));
-    if (!turn.coeffs().allFinite()) return keepFrame(b, positions, frame);
-    turn.normalize();
-    const Eigen::Matrix3d rotation = turn.toRotationMatrix();
-
-    // What the rotation leaves: its box's centre is the shift; the largest remainder, the
-    // motion left. On the sample first (promising?), then on every vertex.
-    constexpr double kGain2 = 0.75 * 0.75;  // a quarter less motion, squared
-    auto leftover = [&](bool every, Vec3& shift, double& kept2) {
-      Vec3 lower = Vec3::Constant(kInf), upper = Vec3::Constant(-kInf);
-      kept2 = 0;
-      for (size_t k = 0, end = every ? n : count; k < end; ++k) {
-        const size_t v = every ? k : sampled(k);
-        const Vec3& from_v = last_world[v];
-        const Vec3 r = positions[v] - rotation * from_v;
-        lower = lower.cwiseMin(r);
-        upper = upper.cwiseMax(r);
-        kept2 = std::max(kept2, (positions[v] - from_v).squaredNorm());
-      }
-      shift = 0.5 * (lower + upper);
-      return (0.5 * (upper - lower)).squaredNorm();  // bounds the largest remainder, squared
-    };
-    Vec3 shift;
-    double kept2 = 0;
-    if (!(leftover(count == n, shift, kept2) < kGain2 * kept2)) return keepFrame(b, positions, frame);
-    if (count < n && !(leftover(true, shift, kept2) < kGain2 * kept2)) return keepFrame(b, positions, frame);
-    Eigen::Isometry3d step = Eigen::Isometry3d::Identity();
-    step.linear() = rotation;
-    step.translation() = shift;
-    Eigen::Isometry3d carried = step * b.frame;
-    Eigen::Quaterniond orientation(carried.linear());
-    orientation.normalize();
-    carried.linear() = orientation.toRotationMatrix();
-    if (!carried.matrix().allFinite()) return keepFrame(b, positions, frame);
-    const Eigen::Isometry3d inverse = carried.inverse(Eigen::Isometry);
-    std::vector<Vec3>& local = b.local_positions;
-    local.resize(n);
-    double moved2 = 0;
-    for (size_t v = 0; v < n; ++v) {
-      local[v] = inverse * positions[v];
-      moved2 = std::max(moved2, (local[v] - last[v]).squaredNorm());
-    }
-    if (!(moved2 < kGain2 * kept2)) return keepFrame(b, positions, frame);
-    frame = carried;
+    if (!turn.coeffs().allFinite()) return false;
+    fit.rotation = turn.normalized().toRotationMatrix();
     return true;
   }
+  // The shift and the bounds, given the rotation.
+  static void measure(const std::vector<Vec3>& from, const std::vector<Vec3>& to, bool every, MotionFit& fit) {
+    const size_t n = from.size();
+    Vec3 lower = Vec3::Constant(kInf), upper = Vec3::Constant(-kInf);
+    fit.moved2 = 0;
+    for (size_t k = 0, end = every ? n : std::min(n, kFitSample); k < end; ++k) {
+      const size_t v = every ? k : sampled(k, n);
+      const Vec3 r = to[v] - fit.rotation * from[v];
+      lower = lower.cwiseMin(r);
+      upper = upper.cwiseMax(r);
+      fit.moved2 = std::max(fit.moved2, (to[v] - from[v]).squaredNorm());
+    }
+    fit.shift = 0.5 * (lower + upper);
+    fit.left2 = (0.5 * (upper - lower)).squaredNorm();
+  }
+  static Eigen::Isometry3d orthonormal(Eigen::Isometry3d frame) {
+    frame.linear() = Eigen::Quaterniond(frame.linear()).normalized().toRotationMatrix();
+    return frame;
+  }
 
-  // followFrame() without a new frame: the positions in the body's frame, if it has one.
-  static bool keepFrame(Body& b, const std::vector<Vec3>& positions, Eigen::Isometry3d& frame) {
-    if (!b.framed) return false;
-    frame = b.frame;
-    b.local_positions.resize(positions.size());
-    for (size_t v = 0; v < positions.size(); ++v) b.local_positions[v] = b.frame_inverse * positions[v];
-    return true;
+  // How a deforming body takes new positions: in world coordinates (framed false), or in a
+  // frame, with b.local_positions holding them there (frame^-1 * position). Planning changes
+  // nothing but that scratch; commitPositions() applies the plan.
+  struct PositionsPlan {
+    bool framed = false;
+    bool first = false;  // a first frame: the body's coordinates start over (a new lineage)
+    Eigen::Isometry3d frame = Eigen::Isometry3d::Identity();
+  };
+  // The step's rigid motion (from the last positions as given) is followed when it cuts the
+  // step's largest vertex motion by a quarter or more, on a sample first, then on every vertex
+  // (a poor fit is never taken). A body's first frame is fitted to its mesh's own positions,
+  // so that its coordinates in the frame stay near the hierarchy's (a body first framed far
+  // from the origin would otherwise keep that distance's rounding wherever it goes); that
+  // starts its coherent states over, once. Later frames compose the step's motion onto the
+  // last, keeping the states. Positions DeformingBody::setPositions refuses (it reports them)
+  // are planned in world coordinates, or the body's frame.
+  PositionsPlan planPositions(Body& b, const std::vector<Vec3>& positions) {
+    PositionsPlan plan;
+    plan.frame = b.frame;
+    const std::vector<Vec3>& last = b.deforming->positions();  // in b.frame
+    const size_t n = positions.size();
+    bool valid = options.follow_frames && n == last.size() && n > 0;
+    for (size_t v = 0; valid && v < n; ++v) valid = inCoordinateRange(positions[v]);
+    if (!valid) return plan;
+    const std::vector<Vec3>& last_world = b.framed ? b.world_positions : last;  // as given last
+    constexpr double kGain2 = 0.75 * 0.75;  // a quarter less motion, squared
+    MotionFit step;
+    bool moving = fitRotation(last_world, positions, step);
+    if (moving) {
+      measure(last_world, positions, n <= kFitSample, step);
+      moving = step.left2 < kGain2 * step.moved2;
+    }
+    if (moving && n > kFitSample) {
+      measure(last_world, positions, true, step);
+      moving = step.left2 < kGain2 * step.moved2;
+    }
+    std::vector<Vec3>& local = b.local_positions;
+    if (moving && !b.framed) {
+      const std::vector<Vec3>& rest = b.shape->mesh().positions;
+      MotionFit placed;
+      if (!fitRotation(rest, positions, placed)) return plan;
+      measure(rest, positions, true, placed);
+      const Eigen::Isometry3d frame = orthonormal(placed.motion());
+      if (!frame.matrix().allFinite()) return plan;
+      const Eigen::Isometry3d inverse = frame.inverse(Eigen::Isometry);
+      local.resize(n);
+      for (size_t v = 0; v < n; ++v) local[v] = inverse * positions[v];
+      plan.framed = plan.first = true;
+      plan.frame = frame;
+      return plan;
+    }
+    if (moving) {
+      const Eigen::Isometry3d frame = orthonormal(step.motion() * b.frame);
+      if (frame.matrix().allFinite()) {
+        const Eigen::Isometry3d inverse = frame.inverse(Eigen::Isometry);
+        local.resize(n);
+        double moved2 = 0;
+        for (size_t v = 0; v < n; ++v) {
+          local[v] = inverse * positions[v];
+          moved2 = std::max(moved2, (local[v] - last[v]).squaredNorm());
+        }
+        if (moved2 < kGain2 * step.moved2) {
+          plan.framed = true;
+          plan.frame = frame;
+          return plan;
+        }
+      }
+    }
+    if (b.framed) {  // the body's frame
+      local.resize(n);
+      for (size_t v = 0; v < n; ++v) local[v] = b.frame_inverse * positions[v];
+      plan.framed = true;
+    }
+    return plan;
   }
 
   // The world box of a framed body at `positions`, with a margin for the rounding between
@@ -337,30 +381,34 @@ struct DistanceService::Impl {
     return box;
   }
 
-  // A deforming body's new positions (checked by DeformingBody::setPositions: a wrong count or
-  // a non-finite coordinate throws, the body unchanged), re-anchored past its bound.
-  PositionsUpdate applyPositions(Body& b, const std::vector<Vec3>& positions) {
-    // In the followed frame, when there is one (followFrame); the frame changes only once the
-    // body has accepted the positions.
-    Eigen::Isometry3d frame = b.frame;
-    const bool framed = options.follow_frames && followFrame(b, positions, frame);
-    const std::vector<Vec3>& local = framed ? b.local_positions : positions;
-    const DisplacementCheck check = b.deforming->setPositions(local);
+  // A deforming body's new positions, as planned (planPositions), re-anchored past its bound.
+  // DeformingBody checks them (a wrong count, a coordinate not finite or beyond 1e150, a span
+  // beyond the supported mesh size throw) before it changes; the frame is committed after, so
+  // positions that throw leave the body as it was.
+  PositionsUpdate commitPositions(Body& b, const std::vector<Vec3>& positions, const PositionsPlan& plan) {
+    const std::vector<Vec3>& local = plan.framed ? b.local_positions : positions;
     PositionsUpdate update;
-    if (framed) {  // accepted, or anchored below: either way the body is in `frame` now
-      b.framed = true;
-      b.frame = frame;
-      b.frame_inverse = frame.inverse(Eigen::Isometry);
-      b.world_positions = positions;
-      b.world_box = framedBox(positions, frame);
-    }
-    if (!check.accepted) {
-      b.deforming->reanchor(local);
+    if (plan.first) {
+      b.deforming->anchor(local);  // new coordinates: a new lineage
       b.deforming->inflate(b.displacement_bound);
       anchorOrientation(b, local);
-      update.reanchored = true;
-      update.worst_vertex = check.worst_vertex;
-      update.excess = check.excess;
+    } else {
+      const DisplacementCheck check = b.deforming->setPositions(local);
+      if (!check.accepted) {
+        b.deforming->reanchor(local);
+        b.deforming->inflate(b.displacement_bound);
+        anchorOrientation(b, local);
+        update.reanchored = true;
+        update.worst_vertex = check.worst_vertex;
+        update.excess = check.excess;
+      }
+    }
+    if (plan.framed) {
+      b.framed = true;
+      b.frame = plan.frame;
+      b.frame_inverse = plan.frame.inverse(Eigen::Isometry);
+      b.world_positions = positions;
+      b.world_box = framedBox(positions, plan.frame);
     }
     // Inline faces when the last step's queries tested enough leaf blocks to pay for refreshing
     // them all (kInlineFacesOn, kInlineFacesOff). Decided once the positions are accepted, so
@@ -370,6 +418,9 @@ struct DistanceService::Impl {
     b.deforming->setInlineFaces(per_leaf >= (b.deforming->inlineFaces() ? kInlineFacesOff : kInlineFacesOn));
     b.box_dirty = true;
     return update;
+  }
+  PositionsUpdate applyPositions(Body& b, const std::vector<Vec3>& positions) {
+    return commitPositions(b, positions, planPositions(b, positions));
   }
 
   // remove() leaves the removed body's pair states for the next step, whose alignStates()
@@ -990,20 +1041,30 @@ std::vector<PositionsUpdate> DistanceService::setPositions(const std::vector<Bod
                                 " appears twice in the batch");
   std::vector<PositionsUpdate> updates(batch.size());
   impl_->arena->execute([&] {
-    // Coordinates and extent first (read-only), so an error leaves every body unchanged.
+    // Coordinates, plans and extent first (changing nothing but the bodies' scratch), so an
+    // error leaves every body unchanged. The extent is the one the body will hold: in its
+    // frame, if it takes one (a rotation changes a box's diagonal).
     std::vector<uint8_t> finite(batch.size(), 1), fits(batch.size(), 1);
+    std::vector<Impl::PositionsPlan> plans(batch.size());
     tbb::parallel_for(size_t{0}, batch.size(), [&](size_t i) {
       bool ok = true;
       for (const Vec3& x : *batch[i].positions) ok &= inCoordinateRange(x);
       finite[i] = ok;
-      fits[i] = ok && positionsDiagonal(*batch[i].positions) <= kMaxMeshSize;
+      if (!ok) return;
+      plans[i] = impl_->planPositions(*targets[i], *batch[i].positions);
+      const std::vector<Vec3>& held = plans[i].framed ? targets[i]->local_positions : *batch[i].positions;
+      for (const Vec3& x : held) ok &= inCoordinateRange(x);
+      finite[i] = ok ? 1 : 2;
+      fits[i] = ok && positionsDiagonal(held) <= kMaxMeshSize;
     });
     for (size_t i = 0; i < batch.size(); ++i) {
-      if (!finite[i]) throw error(i, " has a non-finite position or one beyond 1e150 in magnitude");
+      if (finite[i] == 0) throw error(i, " has a non-finite position or one beyond 1e150 in magnitude");
+      if (finite[i] == 2) throw error(i, " has a position beyond 1e150 in magnitude in the body's frame");
       if (!fits[i]) throw error(i, " has positions spanning more than the supported mesh size 1e50");
     }
-    tbb::parallel_for(size_t{0}, batch.size(),
-                      [&](size_t i) { updates[i] = impl_->applyPositions(*targets[i], *batch[i].positions); });
+    tbb::parallel_for(size_t{0}, batch.size(), [&](size_t i) {
+      updates[i] = impl_->commitPositions(*targets[i], *batch[i].positions, plans[i]);
+    });
   });
   return updates;
 }

@@ -190,13 +190,15 @@ struct ServiceOptions {
   // (CoherentState::lead_steps; 0: gathered at the point). Answers never depend on it.
   float lead_steps = 3;
   // A deforming body's rigid motion is followed (frame()): each setPositions() fits the rigid
-  // motion that best carries the last positions onto the new ones and keeps it when that at
-  // least halves the largest vertex motion left. The body then holds its positions in that
-  // frame and is queried there, like a rigid body: a soft body carried across the world (with
-  // the points near it) keeps its coherent states and its displacement bound, where in world
-  // coordinates every step's carry would count as deformation (bench_service's carried sheets:
-  // 5-8x slower a step without it, bench/README.md). Answers agree either way up to rounding
-  // (the frame's transform, as for a rigid body's pose).
+  // motion that best carries the last positions onto the new ones and keeps it when that cuts
+  // the step's largest vertex motion by a quarter or more. The body then holds its positions
+  // in that frame and is queried there, like a rigid body: a soft body carried across the
+  // world (with the points near it) keeps its coherent states and its displacement bound,
+  // where in world coordinates every step's carry would count as deformation (bench_service's
+  // carried sheets: 5-8x slower a step without it, bench/README.md). A body's first frame is fitted to its
+  // mesh's own positions (its coordinates in the frame stay near the mesh's; its pair states
+  // start over once). Answers agree either way up to rounding (the frame's transform, as for
+  // a rigid body's pose).
   bool follow_frames = true;
 };
 

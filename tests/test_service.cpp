@@ -1388,3 +1388,94 @@ TEST_CASE("a deforming body carried by a rigid motion: the service follows its f
   CHECK(twin.one.frame(body).matrix() == before.matrix());
   CHECK(twin.one.positions(body) == transformed(local(steps), carry(steps)));
 }
+
+// Found by review. Positions that throw leave a framed body as it was (its frame, its
+// positions, its answers), in a single call and in a batch, where the span checked is the one
+// the body holds in its frame. And a body first framed far from the origin, then brought back,
+// answers with the origin's rounding: its coordinates in the frame stay near its mesh's (the
+// first frame is fitted to the mesh's own positions; a frame composed from where it was first
+// framed kept 1e9's rounding: points 1e-6 off the surface were "on" it, and outside).
+TEST_CASE("framed bodies: positions that throw change nothing; a body framed far away comes back exact", "[service][errors]") {
+  const Mesh sphere = scenes::icosphere(2, 1.0);
+  {
+    DistanceService service(ServiceOptions{1, 32});
+    const BodyHandle b = service.addDeforming(service.hierarchyFor(sphere), 0.05);
+    for (int s = 1; s <= 3; ++s)
+      service.setPositions(b, transformed(sphere.positions, makePose(0.1 * s, Vec3(0, 0, 1), Vec3(s, 0, 0))));
+    REQUIRE_FALSE(service.frame(b).matrix().isIdentity());
+    const Eigen::Isometry3d frame = service.frame(b);
+    const std::vector<Vec3> before = service.positions(b);
+    const Box3 box = service.worldBox(b);
+    const PointMatrix points = toMatrix({Vec3(3, 0, 1.1), Vec3(3.6, 0.1, 0)});
+    const StepResult r0 = service.step(points, 0.5);
+    REQUIRE(r0.closest(0));
+    REQUIRE(r0.closest(1));
+    std::vector<Vec3> bad = before;
+    for (Vec3& x : bad) x *= 1e51;  // coordinates in range, a span beyond 1e50
+    CHECK_THROWS_WITH(service.setPositions(b, bad), Catch::Contains("supported mesh size"));
+    CHECK(service.frame(b).matrix() == frame.matrix());
+    CHECK(service.positions(b) == before);
+    CHECK(service.worldBox(b).upper == box.upper);
+    const StepResult r1 = service.step(points, 0.5);
+    for (size_t i = 0; i < 2; ++i) {
+      REQUIRE(r1.closest(i));
+      CHECK(r1.closest(i)->distance == r0.closest(i)->distance);
+    }
+  }
+  {
+    // Never framed.
+    const Mesh away = scenes::icosphere(2, 1.0, Vec3(10, 0, 0));
+    DistanceService service(ServiceOptions{1, 32});
+    const BodyHandle b = service.addDeforming(service.hierarchyFor(away), 0.05);
+    std::vector<Vec3> bad = away.positions;
+    for (Vec3& x : bad) x *= 1e51;
+    CHECK_THROWS_WITH(service.setPositions(b, bad), Catch::Contains("supported mesh size"));
+    CHECK(service.frame(b).matrix().isIdentity());
+    CHECK(service.positions(b) == away.positions);
+  }
+  {
+    // A batch whose world span passes and whose span in a body's frame does not: nothing changes.
+    Mesh cube;
+    for (int i = 0; i < 8; ++i) cube.positions.push_back(Vec3(i & 1, (i >> 1) & 1, (i >> 2) & 1) - Vec3::Constant(0.5));
+    cube.triangles = {{0, 2, 1}, {1, 2, 3}, {4, 5, 6}, {5, 7, 6}, {0, 1, 4}, {1, 5, 4},
+                      {2, 6, 3}, {3, 6, 7}, {0, 4, 2}, {2, 4, 6}, {1, 3, 5}, {3, 7, 5}};
+    const Mesh other = scenes::icosphere(1, 1.0, Vec3(5, 0, 0));
+    DistanceService service(ServiceOptions{2, 32});
+    const BodyHandle a = service.addDeforming(service.hierarchyFor(other), 0.05);
+    const BodyHandle b = service.addDeforming(service.hierarchyFor(cube), 0.05);
+    service.setPositions(b, transformed(cube.positions, makePose(kPi / 4, Vec3(0, 0, 1), Vec3::Zero())));
+    REQUIRE_FALSE(service.frame(b).matrix().isIdentity());
+    const std::vector<Vec3> a_before = service.positions(a), b_before = service.positions(b);
+    const Eigen::Isometry3d b_frame = service.frame(b);
+    std::vector<Vec3> big = cube.positions;  // world span 0.9e50; about 1.16e50 in b's frame
+    for (Vec3& x : big) x *= 0.9e50 / std::sqrt(3.0);
+    std::vector<Vec3> a_new = transformed(other.positions, makePose(0, Vec3(0, 0, 1), Vec3(0.01, 0, 0)));
+    CHECK_THROWS_WITH(service.setPositions({{a, &a_new}, {b, &big}}), Catch::Contains("supported mesh size"));
+    CHECK(service.positions(a) == a_before);
+    CHECK(service.positions(b) == b_before);
+    CHECK(service.frame(b).matrix() == b_frame.matrix());
+  }
+  {
+    // From 1e9 to the origin, turning; then points 1e-6 and 2e-6 inside and outside.
+    DistanceService service(ServiceOptions{1, 32});
+    auto where = [](int s) { return makePose(0.01 * s, Vec3(0, 0, 1), Vec3(1e9 * (1 - s / 20.0), 0, 0)); };
+    const BodyHandle b = service.addDeforming(service.hierarchyFor(sphere), 0.05, transformed(sphere.positions, where(0)));
+    for (int s = 1; s <= 20; ++s) service.setPositions(b, transformed(sphere.positions, where(s)));
+    CHECK(service.frame(b).translation().norm() < 1e-6);
+    const Mesh world = withPositions(sphere, service.positions(b));
+    std::vector<Vec3> points;
+    for (double offset : {-2e-6, -1e-6, 1e-6, 2e-6})
+      points.push_back(world.positions[5] + offset * world.positions[5].normalized());
+    const StepResult zero = service.step(toMatrix(points), 0.0);
+    const StepResult any = service.step(toMatrix(points), 1.0);
+    for (size_t i = 0; i < points.size(); ++i) {
+      const double truth = bruteForceClosest(world, points[i]).distance;
+      INFO("point " << i << ", distance " << truth);
+      CHECK(zero.closest(i) == nullptr);
+      REQUIRE(any.closest(i));
+      // Up to the rounding of the frame's transform at unit coordinates (was 1e-8 to 1e-7).
+      CHECK(std::abs(any.closest(i)->distance - truth) <= 1e-14);
+      CHECK((any.closest(i)->sign == HitSign::kInside) == (i < 2));
+    }
+  }
+}
