@@ -195,7 +195,7 @@ struct ServiceOptions {
   // in that frame and is queried there, like a rigid body: a soft body carried across the
   // world (with the points near it) keeps its coherent states and its displacement bound,
   // where in world coordinates every step's carry would count as deformation (bench_service's
-  // carried sheets: 5-8x slower a step without it, bench/README.md). A body's first frame is fitted to its
+  // carried sheets: 3.4-5.6x slower a step without it, bench/README.md). A body's first frame is fitted to its
   // mesh's own positions (its coordinates in the frame stay near the mesh's; its pair states
   // start over once). Answers agree either way up to rounding (the frame's transform, as for
   // a rigid body's pose).
