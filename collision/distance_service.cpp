@@ -293,7 +293,8 @@ struct DistanceService::Impl {
   // nothing but that scratch; commitPositions() applies the plan.
   struct PositionsPlan {
     bool framed = false;
-    bool first = false;  // a first frame: the body's coordinates start over (a new lineage)
+    bool first = false;  // a first frame, or back to world coordinates: the body's coordinates
+                         // start over (a new lineage)
     Eigen::Isometry3d frame = Eigen::Isometry3d::Identity();
   };
   // The step's rigid motion (from the last positions as given) is followed when it cuts the
@@ -302,16 +303,34 @@ struct DistanceService::Impl {
   // so that its coordinates in the frame stay near the hierarchy's (a body first framed far
   // from the origin would otherwise keep that distance's rounding wherever it goes); that
   // starts its coherent states over, once. Later frames compose the step's motion onto the
-  // last, keeping the states. Positions DeformingBody::setPositions refuses (it reports them)
-  // are planned in world coordinates, or the body's frame.
+  // last, keeping the states. The mesh's own coordinates set the rounding in the frame, so a
+  // frame is taken, and kept, only while they are within kFrameReach times the world's scale
+  // (the positions' largest coordinate, or the mesh's size if larger): a mesh authored at 1e9
+  // whose body lives near the origin stays in world coordinates, or goes back to them, where
+  // its answers keep the origin's rounding. Positions DeformingBody::setPositions refuses (it
+  // reports them) are planned in world coordinates, or the body's frame.
+  static constexpr double kFrameReach = 4;
   PositionsPlan planPositions(Body& b, const std::vector<Vec3>& positions) {
     PositionsPlan plan;
     plan.frame = b.frame;
     const std::vector<Vec3>& last = b.deforming->positions();  // in b.frame
     const size_t n = positions.size();
     bool valid = options.follow_frames && n == last.size() && n > 0;
-    for (size_t v = 0; valid && v < n; ++v) valid = inCoordinateRange(positions[v]);
+    double world = 0;
+    for (size_t v = 0; valid && v < n; ++v) {
+      valid = inCoordinateRange(positions[v]);
+      world = std::max(world, positions[v].cwiseAbs().maxCoeff());
+    }
     if (!valid) return plan;
+    const BodyShape& shape = *b.shape;
+    const double mesh_reach = shape.restLower().cwiseAbs().cwiseMax(shape.restUpper().cwiseAbs()).maxCoeff();
+    if (!(mesh_reach <= kFrameReach * std::max(world, (shape.restUpper() - shape.restLower()).norm()))) {
+      if (b.framed) {  // back to world coordinates
+        plan.first = true;
+        plan.frame = Eigen::Isometry3d::Identity();
+      }
+      return plan;
+    }
     const std::vector<Vec3>& last_world = b.framed ? b.world_positions : last;  // as given last
     constexpr double kGain2 = 0.75 * 0.75;  // a quarter less motion, squared
     MotionFit step;
@@ -392,6 +411,7 @@ struct DistanceService::Impl {
       b.deforming->anchor(local);  // new coordinates: a new lineage
       b.deforming->inflate(b.displacement_bound);
       anchorOrientation(b, local);
+      update.reanchored = true;
     } else {
       const DisplacementCheck check = b.deforming->setPositions(local);
       if (!check.accepted) {
@@ -409,6 +429,10 @@ struct DistanceService::Impl {
       b.frame_inverse = plan.frame.inverse(Eigen::Isometry);
       b.world_positions = positions;
       b.world_box = framedBox(positions, plan.frame);
+    } else if (b.framed) {  // back to world coordinates
+      b.framed = false;
+      b.frame = b.frame_inverse = Eigen::Isometry3d::Identity();
+      std::vector<Vec3>().swap(b.world_positions);
     }
     // Inline faces when the last step's queries tested enough leaf blocks to pay for refreshing
     // them all (kInlineFacesOn, kInlineFacesOff). Decided once the positions are accepted, so

@@ -160,9 +160,11 @@ class StepResult {
 // What setPositions() did.
 struct PositionsUpdate {
   // false: every vertex stayed within its displacement bound; the bounds were kept (cheap).
-  // true: some vertex left its bound; the body was re-anchored at the new positions (bounds
-  // recomputed exactly there, then inflated by the body's displacement bound again; costs the
-  // build's radius phase). Either way the next queries are exact.
+  // true: the body was re-anchored at the new positions (bounds recomputed exactly there, then
+  // inflated by the body's displacement bound again): some vertex left its bound, or the body's
+  // coordinates started over in a new frame (its first followed frame, or back to world
+  // coordinates; worst_vertex kInvalidIndex; ServiceOptions::follow_frames). Either way the
+  // next queries are exact.
   bool reanchored = false;
   VertexIndex worst_vertex = kInvalidIndex;  // reanchored: the vertex farthest past its bound
   double excess = 0;                         // reanchored: how far past its bound it was
@@ -281,7 +283,8 @@ class DistanceService {
   // kKeyframed, kDeforming: the current world positions [vertex].
   const std::vector<Vec3>& positions(BodyHandle body) const;
   // The body's world box: rigid, its rest box's 8 corners transformed (with a 1e-12 relative
-  // margin for rounding); otherwise the box of its current positions.
+  // margin for rounding); otherwise the box of its current positions (a deforming body in a
+  // followed frame: with the same margin, for the rounding of the frame's transform).
   Box3 worldBox(BodyHandle body);
 
   // ---- Queries ---------------------------------------------------------------------------

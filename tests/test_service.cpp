@@ -34,6 +34,7 @@
 #include <functional>
 #include <limits>
 #include <map>
+#include <numeric>
 #include <memory>
 #include <sstream>
 #include <stdexcept>
@@ -671,11 +672,24 @@ TEST_CASE("a closed body placed as a mirror image keeps inside inside", "[servic
     checkSigns(s, "deforming, mirrored by setPositions");
   }
   {
-    DistanceService s;  // a bound larger than the body: mirrored without re-anchoring
+    // A bound larger than the body: mirrored without re-anchoring (in world coordinates: a
+    // followed frame would start the body over, a re-anchor, as the next block shows).
+    ServiceOptions options;
+    options.follow_frames = false;
+    DistanceService s(options);
     const BodyHandle b = s.addDeforming(s.hierarchyFor(torus), 5.0);
     s.step(toMatrix(points), kInf, QueryMode::kClosest);
     CHECK_FALSE(s.setPositions(b, mirrored).reanchored);
     checkSigns(s, "deforming, mirrored within its bound");
+  }
+  {
+    DistanceService s;  // the same, frames followed: the jump fits a rotation, a first frame
+    const BodyHandle b = s.addDeforming(s.hierarchyFor(torus), 5.0);
+    s.step(toMatrix(points), kInf, QueryMode::kClosest);
+    const PositionsUpdate u = s.setPositions(b, mirrored);
+    CHECK(u.reanchored == !s.frame(b).matrix().isIdentity());
+    CHECK(u.worst_vertex == kInvalidIndex);
+    checkSigns(s, "deforming, mirrored within its bound, frames followed");
   }
   {
     DistanceService s;
@@ -1368,8 +1382,9 @@ TEST_CASE("a deforming body carried by a rigid motion: the service follows its f
   CHECK(Eigen::AngleAxisd(frame.linear().transpose() * carry(steps).linear()).angle() < 0.02);
   CHECK(twin.one.frame(still).matrix() == Eigen::Matrix4d::Identity());
   CHECK(plain.frame(plain_body).matrix() == Eigen::Matrix4d::Identity());
-  // In its frame the body stays within its bound and its pairs within their certificates.
-  CHECK(reanchored == 0);
+  // In its frame the body stays within its bound and its pairs within their certificates: one
+  // re-anchor, its first frame (its coordinates start over).
+  CHECK(reanchored == 1);
   CHECK(plain_reanchored >= steps - 2);
   INFO("certified " << certified << " of " << pairs << "; plain " << plain_certified << " of " << plain_pairs);
   CHECK(certified > 0.6 * static_cast<double>(pairs));
@@ -1455,17 +1470,15 @@ TEST_CASE("framed bodies: positions that throw change nothing; a body framed far
     CHECK(service.positions(b) == b_before);
     CHECK(service.frame(b).matrix() == b_frame.matrix());
   }
-  {
-    // From 1e9 to the origin, turning; then points 1e-6 and 2e-6 inside and outside.
-    DistanceService service(ServiceOptions{1, 32});
-    auto where = [](int s) { return makePose(0.01 * s, Vec3(0, 0, 1), Vec3(1e9 * (1 - s / 20.0), 0, 0)); };
-    const BodyHandle b = service.addDeforming(service.hierarchyFor(sphere), 0.05, transformed(sphere.positions, where(0)));
-    for (int s = 1; s <= 20; ++s) service.setPositions(b, transformed(sphere.positions, where(s)));
-    CHECK(service.frame(b).translation().norm() < 1e-6);
+  // Points 1e-6 and 2e-6 inside and outside a body near the origin, along a vertex's normal:
+  // exact up to the origin's rounding, signed right, no hit at max_distance 0.
+  auto checkNearSurface = [&](DistanceService& service, BodyHandle b) {
     const Mesh world = withPositions(sphere, service.positions(b));
+    const Vec3 center = std::accumulate(world.positions.begin(), world.positions.end(), Vec3(Vec3::Zero())) /
+                        static_cast<double>(world.positions.size());
     std::vector<Vec3> points;
     for (double offset : {-2e-6, -1e-6, 1e-6, 2e-6})
-      points.push_back(world.positions[5] + offset * world.positions[5].normalized());
+      points.push_back(world.positions[5] + offset * (world.positions[5] - center).normalized());
     const StepResult zero = service.step(toMatrix(points), 0.0);
     const StepResult any = service.step(toMatrix(points), 1.0);
     for (size_t i = 0; i < points.size(); ++i) {
@@ -1477,5 +1490,49 @@ TEST_CASE("framed bodies: positions that throw change nothing; a body framed far
       CHECK(std::abs(any.closest(i)->distance - truth) <= 1e-14);
       CHECK((any.closest(i)->sign == HitSign::kInside) == (i < 2));
     }
+  };
+  {
+    // A mesh authored at 1e9 whose body lives near the origin: its own coordinates would set
+    // the rounding in a frame, so it stays in world coordinates.
+    const Mesh far = scenes::icosphere(2, 1.0, Vec3(1e9, 0, 0));
+    DistanceService service(ServiceOptions{1, 32});
+    auto where = [](int s) { return makePose(0.01 * s, Vec3(0, 0, 1), Vec3(-1e9 + 0.1 * s, 0, 0)); };
+    const BodyHandle b = service.addDeforming(service.hierarchyFor(far), 0.05, transformed(far.positions, where(0)));
+    for (int s = 1; s <= 5; ++s) service.setPositions(b, transformed(far.positions, where(s)));
+    CHECK(service.frame(b).matrix().isIdentity());
+    checkNearSurface(service, b);
+  }
+  {
+    // A mesh authored at 100, framed there, carried to the origin: back to world coordinates
+    // once its own would set the rounding (a re-anchor, reported).
+    const Mesh at100 = scenes::icosphere(2, 1.0, Vec3(100, 0, 0));
+    DistanceService service(ServiceOptions{1, 32});
+    auto where = [](int s) { return makePose(0.02 * s, Vec3(0, 0, 1), Vec3(-10.0 * s, 0, 0)); };
+    const BodyHandle b = service.addDeforming(service.hierarchyFor(at100), 0.05);
+    size_t changes = 0;
+    bool framed = false;
+    for (int s = 1; s <= 10; ++s) {
+      const PositionsUpdate u = service.setPositions(b, transformed(at100.positions, where(s)));
+      const bool now = !service.frame(b).matrix().isIdentity();
+      if (now != framed) {  // into a frame, or back out: the coordinates start over
+        ++changes;
+        CHECK(u.reanchored);
+        CHECK(u.worst_vertex == kInvalidIndex);
+      }
+      framed = now;
+    }
+    CHECK(changes == 2);
+    CHECK_FALSE(framed);
+    checkNearSurface(service, b);
+  }
+  {
+    // From 1e9 to the origin, turning; then points 1e-6 and 2e-6 inside and outside.
+    DistanceService service(ServiceOptions{1, 32});
+    auto where = [](int s) { return makePose(0.01 * s, Vec3(0, 0, 1), Vec3(1e9 * (1 - s / 20.0), 0, 0)); };
+    const BodyHandle b = service.addDeforming(service.hierarchyFor(sphere), 0.05, transformed(sphere.positions, where(0)));
+    for (int s = 1; s <= 20; ++s) service.setPositions(b, transformed(sphere.positions, where(s)));
+    CHECK_FALSE(service.frame(b).matrix().isIdentity());
+    CHECK(service.frame(b).translation().norm() < 1e-6);
+    checkNearSurface(service, b);
   }
 }
