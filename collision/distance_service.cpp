@@ -121,7 +121,7 @@ struct Body {
   uint64_t orientation_last_lineage = 0;  // and its lineage
 
   // A deforming body's followed frame (ServiceOptions::follow_frames): the rigid motion fitted
-  // to its positions, composed over the steps. The body keeps its positions in this frame
+  // to its positions (planPositions). The body keeps its positions in this frame
   // (frame_inverse * world), so its drift, displacement bound and pair states see the
   // deformation alone; queries run there, like a rigid body's. Identity (framed false) until
   // following a motion first pays.
@@ -129,8 +129,7 @@ struct Body {
   Eigen::Isometry3d frame = Eigen::Isometry3d::Identity();
   Eigen::Isometry3d frame_inverse = Eigen::Isometry3d::Identity();
   std::vector<Vec3> world_positions;  // framed: the positions as given (positions())
-  std::vector<Vec3> local_positions;  // framed: applyPositions' scratch
-  Box3 world_box;                     // framed: the box of world_positions
+  std::vector<Vec3> local_positions;  // planPositions' scratch: the positions in a frame
 
   // The pose that places the body's frame in the world, or null where the queries run in the
   // world (key-framed bodies, and deforming bodies not framed).
@@ -383,23 +382,6 @@ struct DistanceService::Impl {
     return plan;
   }
 
-  // The world box of a framed body at `positions`, with a margin for the rounding between
-  // them and the body's positions in its frame, placed by it (where the queries run).
-  static Box3 framedBox(const std::vector<Vec3>& positions, const Eigen::Isometry3d& frame) {
-    Box3 box;
-    box.lower = Vec3::Constant(kInf);
-    box.upper = Vec3::Constant(-kInf);
-    for (const Vec3& x : positions) {
-      box.lower = box.lower.cwiseMin(x);
-      box.upper = box.upper.cwiseMax(x);
-    }
-    const double extent = box.lower.cwiseAbs().cwiseMax(box.upper.cwiseAbs()).maxCoeff() +
-                          frame.translation().cwiseAbs().maxCoeff();
-    box.lower.array() -= 1e-12 * extent;
-    box.upper.array() += 1e-12 * extent;
-    return box;
-  }
-
   // A deforming body's new positions, as planned (planPositions), re-anchored past its bound.
   // DeformingBody checks them (a wrong count, a coordinate not finite or beyond 1e150, a span
   // beyond the supported mesh size throw) before it changes; the frame is committed after, so
@@ -409,26 +391,25 @@ struct DistanceService::Impl {
     PositionsUpdate update;
     if (plan.first) {
       b.deforming->anchor(local);  // new coordinates: a new lineage
-      b.deforming->inflate(b.displacement_bound);
-      anchorOrientation(b, local);
       update.reanchored = true;
     } else {
       const DisplacementCheck check = b.deforming->setPositions(local);
       if (!check.accepted) {
         b.deforming->reanchor(local);
-        b.deforming->inflate(b.displacement_bound);
-        anchorOrientation(b, local);
         update.reanchored = true;
         update.worst_vertex = check.worst_vertex;
         update.excess = check.excess;
       }
+    }
+    if (update.reanchored) {
+      b.deforming->inflate(b.displacement_bound);
+      anchorOrientation(b, local);
     }
     if (plan.framed) {
       b.framed = true;
       b.frame = plan.frame;
       b.frame_inverse = plan.frame.inverse(Eigen::Isometry);
       b.world_positions = positions;
-      b.world_box = framedBox(positions, plan.frame);
     } else if (b.framed) {  // back to world coordinates
       b.framed = false;
       b.frame = b.frame_inverse = Eigen::Isometry3d::Identity();
@@ -535,17 +516,15 @@ struct DistanceService::Impl {
       box.lower.array() -= margin;
       box.upper.array() += margin;
     } else {
-      // A framed body's orientation is its positions' in its frame (a rotation keeps a volume).
+      // A framed body's box is its world positions' with the rigid margin (the queries run in
+      // its frame); its orientation is its positions' in the frame (a rotation keeps a volume).
       const std::vector<Vec3>& pos = b.keyframed ? b.keyframed->positions() : b.deforming->positions();
+      positionsBounds(b.framed ? b.world_positions : pos, box.lower, box.upper);
       if (b.framed) {
-        box = b.world_box;
-      } else {
-        box.lower = Vec3::Constant(kInf);
-        box.upper = Vec3::Constant(-kInf);
-        for (const Vec3& x : pos) {
-          box.lower = box.lower.cwiseMin(x);
-          box.upper = box.upper.cwiseMax(x);
-        }
+        const double margin = 1e-12 * (box.lower.cwiseAbs().cwiseMax(box.upper.cwiseAbs()).maxCoeff() +
+                                       b.frame.translation().cwiseAbs().maxCoeff());
+        box.lower.array() -= margin;
+        box.upper.array() += margin;
       }
       if (b.shape->closed()) b.orientation = placementOrientation(b, pos);
     }
@@ -1068,24 +1047,27 @@ std::vector<PositionsUpdate> DistanceService::setPositions(const std::vector<Bod
     // Coordinates, plans and extent first (changing nothing but the bodies' scratch), so an
     // error leaves every body unchanged. The extent is the one the body will hold: in its
     // frame, if it takes one (a rotation changes a box's diagonal).
-    std::vector<uint8_t> finite(batch.size(), 1), fits(batch.size(), 1);
+    std::vector<const char*> problem(batch.size(), nullptr);
     std::vector<Impl::PositionsPlan> plans(batch.size());
-    tbb::parallel_for(size_t{0}, batch.size(), [&](size_t i) {
+    auto inRange = [](const std::vector<Vec3>& positions) {
       bool ok = true;
-      for (const Vec3& x : *batch[i].positions) ok &= inCoordinateRange(x);
-      finite[i] = ok;
-      if (!ok) return;
+      for (const Vec3& x : positions) ok &= inCoordinateRange(x);
+      return ok;
+    };
+    tbb::parallel_for(size_t{0}, batch.size(), [&](size_t i) {
+      if (!inRange(*batch[i].positions)) {
+        problem[i] = " has a non-finite position or one beyond 1e150 in magnitude";
+        return;
+      }
       plans[i] = impl_->planPositions(*targets[i], *batch[i].positions);
       const std::vector<Vec3>& held = plans[i].framed ? targets[i]->local_positions : *batch[i].positions;
-      for (const Vec3& x : held) ok &= inCoordinateRange(x);
-      finite[i] = ok ? 1 : 2;
-      fits[i] = ok && positionsDiagonal(held) <= kMaxMeshSize;
+      if (!inRange(held))
+        problem[i] = " has a position beyond 1e150 in magnitude in the body's frame";
+      else if (!(positionsDiagonal(held) <= kMaxMeshSize))
+        problem[i] = " has positions spanning more than the supported mesh size 1e50";
     });
-    for (size_t i = 0; i < batch.size(); ++i) {
-      if (finite[i] == 0) throw error(i, " has a non-finite position or one beyond 1e150 in magnitude");
-      if (finite[i] == 2) throw error(i, " has a position beyond 1e150 in magnitude in the body's frame");
-      if (!fits[i]) throw error(i, " has positions spanning more than the supported mesh size 1e50");
-    }
+    for (size_t i = 0; i < batch.size(); ++i)
+      if (problem[i]) throw error(i, problem[i]);
     tbb::parallel_for(size_t{0}, batch.size(), [&](size_t i) {
       updates[i] = impl_->commitPositions(*targets[i], *batch[i].positions, plans[i]);
     });

@@ -63,13 +63,19 @@ double surfaceArea(const Mesh& mesh) {
   return area;
 }
 
-double positionsDiagonal(const std::vector<Vec3>& positions) {
-  if (positions.empty()) return 0;
-  Vec3 lower = positions[0], upper = positions[0];
+void positionsBounds(const std::vector<Vec3>& positions, Vec3& lower, Vec3& upper) {
+  lower = Vec3::Constant(std::numeric_limits<double>::infinity());
+  upper = -lower;
   for (const Vec3& x : positions) {
     lower = lower.cwiseMin(x);
     upper = upper.cwiseMax(x);
   }
+}
+
+double positionsDiagonal(const std::vector<Vec3>& positions) {
+  if (positions.empty()) return 0;
+  Vec3 lower, upper;
+  positionsBounds(positions, lower, upper);
   return (upper - lower).norm();
 }
 

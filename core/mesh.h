@@ -38,6 +38,8 @@ std::string checkMesh(const Mesh& mesh);
 double triangleArea(const Mesh& mesh, size_t t);
 double surfaceArea(const Mesh& mesh);
 
+// Axis-aligned bounds of all `positions` (lower = +inf, upper = -inf for none).
+void positionsBounds(const std::vector<Vec3>& positions, Vec3& lower, Vec3& upper);
 // The bounding-box diagonal of all `positions` (moved vertices: deform/ refuses positions whose
 // diagonal exceeds kMaxMeshSize, as checkMesh refuses such meshes). 0 for none.
 double positionsDiagonal(const std::vector<Vec3>& positions);
