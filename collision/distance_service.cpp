@@ -304,23 +304,21 @@ struct DistanceService::Impl {
   // starts its coherent states over, once. Later frames compose the step's motion onto the
   // last, keeping the states. The mesh's own coordinates set the rounding in the frame, so a
   // frame is taken, and kept, only while they are within kFrameReach times the world's scale
-  // (the positions' largest coordinate, or the mesh's size if larger): a mesh authored at 1e9
+  // (the largest coordinate of the fit's sample, or the mesh's size if larger): a mesh authored at 1e9
   // whose body lives near the origin stays in world coordinates, or goes back to them, where
-  // its answers keep the origin's rounding. Positions DeformingBody::setPositions refuses (it
-  // reports them) are planned in world coordinates, or the body's frame.
+  // its answers keep the origin's rounding. Only a plan in a frame reads every position; one
+  // with a coordinate not finite or beyond 1e150 is planned in world coordinates, where
+  // DeformingBody::setPositions refuses it by name (its coordinates in the frame could pass).
   static constexpr double kFrameReach = 4;
   PositionsPlan planPositions(Body& b, const std::vector<Vec3>& positions) {
     PositionsPlan plan;
     plan.frame = b.frame;
     const std::vector<Vec3>& last = b.deforming->positions();  // in b.frame
     const size_t n = positions.size();
-    bool valid = options.follow_frames && n == last.size() && n > 0;
+    if (!options.follow_frames || n != last.size() || n == 0) return plan;
     double world = 0;
-    for (size_t v = 0; valid && v < n; ++v) {
-      valid = inCoordinateRange(positions[v]);
-      world = std::max(world, positions[v].cwiseAbs().maxCoeff());
-    }
-    if (!valid) return plan;
+    for (size_t i = 0; i < std::min(n, kFitSample); ++i)
+      world = std::max(world, positions[sampled(i, n)].cwiseAbs().maxCoeff());
     const BodyShape& shape = *b.shape;
     const double mesh_reach = shape.restLower().cwiseAbs().cwiseMax(shape.restUpper().cwiseAbs()).maxCoeff();
     if (!(mesh_reach <= kFrameReach * std::max(world, (shape.restUpper() - shape.restLower()).norm()))) {
@@ -350,23 +348,16 @@ struct DistanceService::Impl {
       measure(rest, positions, true, placed);
       const Eigen::Isometry3d frame = orthonormal(placed.motion());
       if (!frame.matrix().allFinite()) return plan;
-      const Eigen::Isometry3d inverse = frame.inverse(Eigen::Isometry);
-      local.resize(n);
-      for (size_t v = 0; v < n; ++v) local[v] = inverse * positions[v];
+      if (!toFrame(frame.inverse(Eigen::Isometry), positions, local)) return plan;
       plan.framed = plan.first = true;
       plan.frame = frame;
       return plan;
     }
     if (moving) {
       const Eigen::Isometry3d frame = orthonormal(step.motion() * b.frame);
-      if (frame.matrix().allFinite()) {
-        const Eigen::Isometry3d inverse = frame.inverse(Eigen::Isometry);
-        local.resize(n);
+      if (frame.matrix().allFinite() && toFrame(frame.inverse(Eigen::Isometry), positions, local)) {
         double moved2 = 0;
-        for (size_t v = 0; v < n; ++v) {
-          local[v] = inverse * positions[v];
-          moved2 = std::max(moved2, (local[v] - last[v]).squaredNorm());
-        }
+        for (size_t v = 0; v < n; ++v) moved2 = std::max(moved2, (local[v] - last[v]).squaredNorm());
         if (moved2 < kGain2 * step.moved2) {
           plan.framed = true;
           plan.frame = frame;
@@ -374,12 +365,19 @@ struct DistanceService::Impl {
         }
       }
     }
-    if (b.framed) {  // the body's frame
-      local.resize(n);
-      for (size_t v = 0; v < n; ++v) local[v] = b.frame_inverse * positions[v];
-      plan.framed = true;
-    }
+    if (b.framed && toFrame(b.frame_inverse, positions, local)) plan.framed = true;  // the body's frame
     return plan;
+  }
+  // local = inverse * positions; false (local unspecified) when a position is not finite or
+  // beyond 1e150.
+  static bool toFrame(const Eigen::Isometry3d& inverse, const std::vector<Vec3>& positions, std::vector<Vec3>& local) {
+    local.resize(positions.size());
+    bool valid = true;
+    for (size_t v = 0; v < positions.size(); ++v) {
+      valid &= inCoordinateRange(positions[v]);
+      local[v] = inverse * positions[v];
+    }
+    return valid;
   }
 
   // A deforming body's new positions, as planned (planPositions), re-anchored past its bound.
@@ -1061,7 +1059,7 @@ std::vector<PositionsUpdate> DistanceService::setPositions(const std::vector<Bod
       }
       plans[i] = impl_->planPositions(*targets[i], *batch[i].positions);
       const std::vector<Vec3>& held = plans[i].framed ? targets[i]->local_positions : *batch[i].positions;
-      if (!inRange(held))
+      if (plans[i].framed && !inRange(held))
         problem[i] = " has a position beyond 1e150 in magnitude in the body's frame";
       else if (!(positionsDiagonal(held) <= kMaxMeshSize))
         problem[i] = " has positions spanning more than the supported mesh size 1e50";

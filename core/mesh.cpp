@@ -64,12 +64,15 @@ double surfaceArea(const Mesh& mesh) {
 }
 
 void positionsBounds(const std::vector<Vec3>& positions, Vec3& lower, Vec3& upper) {
-  lower = Vec3::Constant(std::numeric_limits<double>::infinity());
-  upper = -lower;
+  // In locals: the outputs could alias the positions, so writing them in the loop would store
+  // and reload every step.
+  Vec3 low = Vec3::Constant(std::numeric_limits<double>::infinity()), high = -low;
   for (const Vec3& x : positions) {
-    lower = lower.cwiseMin(x);
-    upper = upper.cwiseMax(x);
+    low = low.cwiseMin(x);
+    high = high.cwiseMax(x);
   }
+  lower = low;
+  upper = high;
 }
 
 double positionsDiagonal(const std::vector<Vec3>& positions) {
