@@ -42,11 +42,11 @@ const char kHausdorffHelp[] =
     "                   cannot change H stops as soon as that is proven, so its interval may be\n"
     "                   wider)\n"
     "  --threads N      worker threads, 0 = all (default); results do not depend on N\n"
-    "  --json FILE      write the result as JSON to FILE ('-': standard output, the summary then\n"
-    "                   goes to standard error)\n"
-    "  --colors FILE    write A as an ASCII PLY with per-vertex 'quality' (distance to B) and\n"
-    "                   red/green/blue on a blue (0) to red (largest vertex distance) ramp;\n"
-    "                   not to the destination of --json\n"
+    "  --json FILE      write the result as JSON to FILE ('-' or /dev/stdout: standard output,\n"
+    "                   the summary then goes to standard error)\n"
+    "  --colors FILE    write A as an ASCII PLY (double coordinates) with per-vertex 'quality'\n"
+    "                   (distance to B) and red/green/blue on a blue (0) to red (largest vertex\n"
+    "                   distance) ramp; '-' as for --json; not to the destination of --json\n"
     "\n"
     "JSON keys: a, b {path, vertices, triangles, diagonal, area}; a_to_b, b_to_a {lower, upper,\n"
     "at [x,y,z], at_triangle, closest [x,y,z], closest_triangle, mean, rms, samples, queries,\n"
@@ -59,6 +59,23 @@ const char kHausdorffHelp[] =
 namespace {
 
 double percent(double value, double diagonal) { return diagonal > 0 ? 100 * value / diagonal : 0; }
+
+// A bound as a percentage of the diagonal, rounded outward: 5 decimals, 7 significant digits
+// in exponent form once that would print more than a dozen digits; "n/a" for a zero diagonal.
+std::string percentBound(double value, double diagonal, bool up) {
+  if (!(diagonal > 0)) return "n/a";
+  const double p = percent(value, diagonal);
+  return std::fabs(p) < 1e6 ? outwardFixed(p, 5, up) : outwardBound(p, 7, up);
+}
+
+// An estimate as a percentage of the diagonal, the same way (no outward rounding).
+std::string percentEstimate(double value, double diagonal) {
+  if (!(diagonal > 0)) return "n/a";
+  const double p = percent(value, diagonal);
+  char text[64];
+  std::snprintf(text, sizeof text, std::fabs(p) < 1e6 ? "%.5f" : "%.7g", p);
+  return text;
+}
 
 bool isStandardOutput(const std::string& path) { return path.empty() || path == "-"; }
 
@@ -143,7 +160,7 @@ void writeColors(Output& out, const Mesh& mesh, const std::vector<double>& dista
     if (std::isfinite(d)) largest = std::max(largest, d);
   out.printf("ply\nformat ascii 1.0\ncomment meshsweep hausdorff: quality = distance to B\n");
   out.printf("element vertex %zu\n", mesh.positions.size());
-  out.printf("property float x\nproperty float y\nproperty float z\nproperty float quality\n");
+  out.printf("property double x\nproperty double y\nproperty double z\nproperty double quality\n");
   out.printf("property uchar red\nproperty uchar green\nproperty uchar blue\n");
   out.printf("element face %zu\nproperty list uchar int vertex_indices\nend_header\n",
              mesh.triangles.size());
@@ -152,7 +169,7 @@ void writeColors(Output& out, const Mesh& mesh, const std::vector<double>& dista
     int rgb[3];
     ramp(largest > 0 ? d / largest : 0.0, rgb);
     const Vec3& p = mesh.positions[v];
-    out.printf("%.9g %.9g %.9g %.9g %d %d %d\n", p.x(), p.y(), p.z(), d, rgb[0], rgb[1], rgb[2]);
+    out.printf("%.17g %.17g %.17g %.17g %d %d %d\n", p.x(), p.y(), p.z(), d, rgb[0], rgb[1], rgb[2]);
   }
   for (const Triangle& t : mesh.triangles) out.printf("3 %u %u %u\n", t[0], t[1], t[2]);
   out.close();
@@ -163,10 +180,9 @@ void printDirection(std::FILE* s, const char* name, const OneSidedHausdorff& h, 
                     double tolerance, const char* from, const char* to) {
   std::fprintf(s, "  %s  max in [%s, %s]  (%s%% .. %s%% of diagonal)\n", name,
                outwardBound(h.lower, 7, false).c_str(), outwardBound(h.upper, 7, true).c_str(),
-               outwardFixed(percent(h.lower, diagonal), 5, false).c_str(),
-               outwardFixed(percent(h.upper, diagonal), 5, true).c_str());
-  std::fprintf(s, "          mean %.7g  RMS %.7g  (%.5f%%, %.5f%%; estimates)\n", h.mean, h.rms,
-               percent(h.mean, diagonal), percent(h.rms, diagonal));
+               percentBound(h.lower, diagonal, false).c_str(), percentBound(h.upper, diagonal, true).c_str());
+  std::fprintf(s, "          mean %.7g  RMS %.7g  (%s%%, %s%%; estimates)\n", h.mean, h.rms,
+               percentEstimate(h.mean, diagonal).c_str(), percentEstimate(h.rms, diagonal).c_str());
   std::fprintf(s, "          lower bound at (%.9g, %.9g, %.9g) on %s triangle %u,\n", h.at.x(),
                h.at.y(), h.at.z(), from, h.at_triangle);
   std::fprintf(s, "          closest point (%.9g, %.9g, %.9g) on %s triangle %u\n", h.closest.x(),
@@ -207,7 +223,11 @@ int runHausdorff(int argc, char** argv, int first) {
   if (args.has("--threads"))
     options.threads = static_cast<unsigned>(args.integer("--threads", 0, 4096));
   options.tighten_both = args.has("--both");
-  const bool json_to_stdout = args.has("--json") && isStandardOutput(args.value("--json"));
+  // A file written to standard output ("-", /dev/stdout, ...) takes it over: it is written
+  // through the stream itself (reopening /dev/stdout would truncate what went before), and
+  // the summary goes to standard error.
+  const bool json_to_stdout = args.has("--json") && namesStandardOutput(args.value("--json"));
+  const bool colors_to_stdout = args.has("--colors") && namesStandardOutput(args.value("--colors"));
   // Both are written at the end, the PLY last: one path for both would silently lose the JSON.
   if (args.has("--json") && args.has("--colors") &&
       sameDestination(args.value("--json"), args.value("--colors")))
@@ -221,7 +241,8 @@ int runHausdorff(int argc, char** argv, int first) {
   std::unique_ptr<Output> json_out, colors_out;
   if (args.has("--json"))
     json_out = std::make_unique<Output>(json_to_stdout ? std::string("-") : args.value("--json"));
-  if (args.has("--colors")) colors_out = std::make_unique<Output>(args.value("--colors"));
+  if (args.has("--colors"))
+    colors_out = std::make_unique<Output>(colors_to_stdout ? std::string("-") : args.value("--colors"));
   const double diagonal = meshDiagonal(a);
   if (!(diagonal > 0) && !(options.tolerance > 0))
     throw MeshError(a_path + ": all vertices coincide (zero diagonal); give --tolerance");
@@ -244,21 +265,20 @@ int runHausdorff(int argc, char** argv, int first) {
   const HausdorffResult r = hausdorff(a, b, options);
   if (progress && last_print >= 0) std::fprintf(stderr, "\r\033[K");
 
-  std::FILE* s = json_to_stdout ? stderr : stdout;
+  std::FILE* s = json_to_stdout || colors_to_stdout ? stderr : stdout;
   std::fprintf(s, "Hausdorff distance between A and B (certified bounds)\n");
   std::fprintf(s, "  A: %s  %zu vertices, %zu triangles, area %.7g, diagonal %.7g\n",
                a_path.c_str(), a.positions.size(), a.triangles.size(), surfaceArea(a), diagonal);
   std::fprintf(s, "  B: %s  %zu vertices, %zu triangles, area %.7g, diagonal %.7g\n",
                b_path.c_str(), b.positions.size(), b.triangles.size(), surfaceArea(b),
                meshDiagonal(b));
-  std::fprintf(s, "  tolerance %.7g (%.5f%% of A's diagonal)\n\n", r.tolerance,
-               percent(r.tolerance, diagonal));
+  std::fprintf(s, "  tolerance %.7g (%s%% of A's diagonal)\n\n", r.tolerance,
+               percentEstimate(r.tolerance, diagonal).c_str());
   printDirection(s, "A -> B", r.a_to_b, diagonal, r.tolerance, "A", "B");
   printDirection(s, "B -> A", r.b_to_a, diagonal, r.tolerance, "B", "A");
   std::fprintf(s, "\n  Hausdorff distance in [%s, %s]  (%s%% .. %s%% of diagonal)%s\n",
                outwardBound(r.lower, 7, false).c_str(), outwardBound(r.upper, 7, true).c_str(),
-               outwardFixed(percent(r.lower, diagonal), 5, false).c_str(),
-               outwardFixed(percent(r.upper, diagonal), 5, true).c_str(),
+               percentBound(r.lower, diagonal, false).c_str(), percentBound(r.upper, diagonal, true).c_str(),
                r.converged ? "" : "  (tolerance not reached: refinement hit rounding size)");
   std::fprintf(s, "  time %.3f s (hierarchies %.3f s), %llu samples, %llu triangles refined\n",
                r.seconds, r.build_seconds, static_cast<unsigned long long>(r.counters.samples),

@@ -336,6 +336,45 @@ else()
   math(EXPR failed "${failed} + 1")
 endif()
 
+# --colors to standard output (found by review): the PLY alone on standard output, the summary
+# on standard error, also through /dev/stdout into a file (which reopened with truncation lost
+# the PLY); empty names are refused; the coordinates keep every digit (a mesh at 1e9 was
+# written as floats with 9 digits, its vertices collapsed).
+check(hausdorff_colors_stdout RC 0 ARGS hausdorff quad.off point.off --colors -
+  OUT "ply\nformat ascii 1.0" "property double x" NOT_OUT "Hausdorff distance in" ERR "Hausdorff distance in")
+execute_process(COMMAND "${MESHSWEEP}" hausdorff quad.off point.off --colors /dev/stdout
+  WORKING_DIRECTORY "${WORK_DIR}" OUTPUT_FILE "${WORK_DIR}/devstdout.ply" ERROR_VARIABLE err RESULT_VARIABLE rc)
+file(READ "${WORK_DIR}/devstdout.ply" devstdout)
+string(FIND "${devstdout}" "end_header" header_at)
+if(rc EQUAL 0 AND devstdout MATCHES "^ply\n" AND NOT header_at EQUAL -1 AND err MATCHES "Hausdorff distance in")
+  math(EXPR passed "${passed} + 1")
+else()
+  message("FAIL hausdorff_colors_devstdout: rc ${rc}, file starts '${devstdout}'")
+  math(EXPR failed "${failed} + 1")
+endif()
+execute_process(COMMAND "${MESHSWEEP}" hausdorff quad.off point.off --json /dev/stdout
+  WORKING_DIRECTORY "${WORK_DIR}" OUTPUT_VARIABLE json ERROR_VARIABLE err RESULT_VARIABLE rc)
+if(rc EQUAL 0 AND json MATCHES "^{" AND NOT json MATCHES "Hausdorff distance" AND err MATCHES "Hausdorff distance in")
+  math(EXPR passed "${passed} + 1")
+else()
+  message("FAIL hausdorff_json_devstdout: rc ${rc}, standard output '${json}'")
+  math(EXPR failed "${failed} + 1")
+endif()
+check(hausdorff_empty_json RC 2 ARGS hausdorff quad.off point.off --json ""
+  ERR "option --json needs a value")
+check(hausdorff_empty_colors RC 2 ARGS hausdorff quad.off point.off --colors ""
+  ERR "option --colors needs a value")
+file(WRITE "${WORK_DIR}/far.off" "OFF\n3 1 0\n1000000000.0 0 0\n1000000000.5 0 0\n1000000000.0 0.5 0\n3 0 1 2\n")
+check(hausdorff_colors_digits RC 0 ARGS hausdorff far.off far.off --colors -
+  OUT "1000000000.5 0 0 ")
+# Percentages of a tolerance far past the diagonal in exponent form, not 300 digits; none for
+# a mesh of one point.
+check(hausdorff_huge_percent RC 0 ARGS hausdorff quad.off quad.off --tolerance 1e300
+  OUT "of A's diagonal)" NOT_OUT "00000000000000000000")
+file(WRITE "${WORK_DIR}/dot.off" "OFF\n3 1 0\n1 1 1\n1 1 1\n1 1 1\n3 0 1 2\n")
+check(hausdorff_zero_diagonal_percent RC 0 ARGS hausdorff dot.off quad.off --tolerance 0.1
+  OUT "(n/a% of A's diagonal)" NOT_OUT "(0.00000%")
+
 # A report that cannot be written (a full device) is an error, whatever the command.
 if(EXISTS /dev/full)
   foreach(command "info;quad.off" "closest;quad.off;points.txt" "hausdorff;quad.off;quad.off")
