@@ -238,6 +238,7 @@ struct DistanceService::Impl {
     Eigen::Matrix3d rotation = Eigen::Matrix3d::Identity();
     Vec3 shift = Vec3::Zero();
     double left2 = 0, moved2 = 0;
+    double left_sum = 0, moved_sum = 0;  // the sums of |remainder| and |to - from|
     Eigen::Isometry3d motion() const {
       Eigen::Isometry3d m = Eigen::Isometry3d::Identity();
       m.linear() = rotation;
@@ -281,6 +282,19 @@ struct DistanceService::Impl {
     }
     fit.shift = 0.5 * (lower + upper);
     fit.left2 = (0.5 * (upper - lower)).squaredNorm();
+    // The mean motions: a part moving alone (an arm) is no rigid motion to follow, though
+    // shifting the whole body by half its motion halves the largest.
+    fit.moved_sum = fit.left_sum = 0;
+    for (size_t k = 0, end = every ? n : std::min(n, kFitSample); k < end; ++k) {
+      const size_t v = every ? k : sampled(k, n);
+      fit.moved_sum += (to[v] - from[v]).norm();
+      fit.left_sum += (to[v] - fit.rotation * from[v] - fit.shift).norm();
+    }
+  }
+  // Whether the fit is worth following: a quarter less of the largest motion and of the mean.
+  static bool gains(const MotionFit& fit) {
+    constexpr double kGain = 0.75;
+    return fit.left2 < kGain * kGain * fit.moved2 && fit.left_sum < kGain * fit.moved_sum;
   }
   static Eigen::Isometry3d orthonormal(Eigen::Isometry3d frame) {
     frame.linear() = Eigen::Quaterniond(frame.linear()).normalized().toRotationMatrix();
@@ -297,8 +311,8 @@ struct DistanceService::Impl {
     Eigen::Isometry3d frame = Eigen::Isometry3d::Identity();
   };
   // The step's rigid motion (from the last positions as given) is followed when it cuts the
-  // step's largest vertex motion by a quarter or more, on a sample first, then on every vertex
-  // (a poor fit is never taken). A body's first frame is fitted to its mesh's own positions,
+  // step's largest and its mean vertex motion by a quarter or more (gains()), on a sample
+  // first, then on every vertex (a poor fit is never taken). A body's first frame is fitted to its mesh's own positions,
   // so that its coordinates in the frame stay near the hierarchy's (a body first framed far
   // from the origin would otherwise keep that distance's rounding wherever it goes); that
   // starts its coherent states over, once. Later frames compose the step's motion onto the
@@ -334,11 +348,11 @@ struct DistanceService::Impl {
     bool moving = fitRotation(last_world, positions, step);
     if (moving) {
       measure(last_world, positions, n <= kFitSample, step);
-      moving = step.left2 < kGain2 * step.moved2;
+      moving = gains(step);
     }
     if (moving && n > kFitSample) {
       measure(last_world, positions, true, step);
-      moving = step.left2 < kGain2 * step.moved2;
+      moving = gains(step);
     }
     std::vector<Vec3>& local = b.local_positions;
     if (moving && !b.framed) {
@@ -941,6 +955,7 @@ BodyHandle DistanceService::addDeforming(std::shared_ptr<const Hierarchy> hierar
   b.shape = shapeFor(hierarchy);
   b.deforming = std::make_unique<DeformingBody>(std::move(hierarchy));
   b.deforming->setRadii(false);  // the service's queries read boxes only: anchors skip the radius phase
+  b.deforming->setRegionalDrift(impl_->options.regional_drift);
   if (!positions.empty()) b.deforming->anchor(positions);
   b.deforming->inflate(displacement_bound);
   b.displacement_bound = displacement_bound;

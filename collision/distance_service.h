@@ -8,7 +8,7 @@
 //    closedness, rest pseudonormals), one per mesh whatever the number of bodies using it;
 //  - per body, per step: pose, key-frame time or deformed positions with their bounds
 //    (deform/), and the body's world box, recomputed once per step when it changed;
-//  - per (point, body) pair: a CoherentState (core/sweep_query.h, 336 bytes) carried from one
+//  - per (point, body) pair: a CoherentState (core/sweep_query.h, 368 bytes) carried from one
 //    step to the next, plus one QueryStream per thread and body that lends scratch memory.
 //
 // Coherent-state policy: a step keeps exactly the states of the (point, body) pairs it queried
@@ -193,7 +193,8 @@ struct ServiceOptions {
   float lead_steps = 3;
   // A deforming body's rigid motion is followed (frame()): each setPositions() fits the rigid
   // motion that best carries the last positions onto the new ones and keeps it when that cuts
-  // the step's largest vertex motion by a quarter or more. The body then holds its positions
+  // the step's largest and its mean vertex motion by a quarter or more (an arm moving alone is
+  // no rigid motion to follow). The body then holds its positions
   // in that frame and is queried there, like a rigid body: a soft body carried across the
   // world (with the points near it) keeps its coherent states and its displacement bound,
   // where in world coordinates every step's carry would count as deformation (bench_service's
@@ -202,6 +203,11 @@ struct ServiceOptions {
   // start over once). Answers agree either way up to rounding (the frame's transform, as for
   // a rigid body's pose).
   bool follow_frames = true;
+  // A deforming body tracks its drift by region (DeformingBody::setRegionalDrift): a pair near
+  // a part that stays still keeps its certificate while another part moves fast
+  // (bench_service's limb sheets: N-Mx faster a step than with the body's drift alone).
+  // Answers never depend on it.
+  bool regional_drift = true;
 };
 
 class DistanceService {

@@ -388,4 +388,43 @@ std::string validateGeometry(const Hierarchy& h, const TreeGeometry& g) {
   return {};
 }
 
+namespace {
+
+double regionDistance2(const RegionDrift& regions, uint32_t region, const Vec3& p) {
+  const uint32_t count = regions.count;
+  const double* box = regions.box;
+  double d2 = 0;
+  for (int axis = 0; axis < 3; ++axis) {
+    const double below = box[axis * count + region] - p[axis];
+    const double above = p[axis] - box[(3 + axis) * count + region];
+    const double gap = std::max({below, above, 0.0});
+    d2 += gap * gap;
+  }
+  return d2;
+}
+
+double roundedUpRoot(double d2) {
+  return std::nextafter(std::sqrt(d2) * (1 + 1e-12), std::numeric_limits<double>::infinity());
+}
+
+}  // namespace
+
+uint32_t nearestRegion(const RegionDrift& regions, const Vec3& p, double& distance) {
+  double best2 = std::numeric_limits<double>::infinity();
+  uint32_t best = 0;
+  for (uint32_t r = 0; r < regions.count; ++r) {
+    const double d2 = regionDistance2(regions, r, p);
+    if (d2 < best2) {
+      best2 = d2;
+      best = r;
+    }
+  }
+  distance = roundedUpRoot(best2);
+  return best;
+}
+
+double regionDistance(const RegionDrift& regions, uint32_t region, const Vec3& p) {
+  return roundedUpRoot(regionDistance2(regions, region, p));
+}
+
 }  // namespace meshsweeper

@@ -41,6 +41,27 @@ struct alignas(32) Node8 {
 };
 
 
+// Drift by region: the faces are split into regions (nearby faces) whose boxes hold their faces
+// for the whole epoch. Region r's running drift at level k, drift[2 * r + k], grows at each change
+// by how far the farthest vertex of any region whose box lies within width[k] of r's box moved.
+// Between two changes of one epoch, a face within width[k] of a face of region r moved at most
+// the difference of that drift value (rounded up, as grownDrift); a face farther away, at most
+// the difference of the lineage's drift. A new epoch (new regions' boxes) restarts the values.
+struct RegionDrift {
+  uint64_t epoch = 0;                     // a nextGeometryVersion() value; 0: none
+  const uint16_t* face_region = nullptr;  // [face] its region
+  uint32_t count = 0;                     // regions
+  double width[2] = {0, 0};               // neighbourhood widths, width[0] <= width[1]
+  const double* drift = nullptr;          // [2 * region + level]
+  const double* box = nullptr;            // [axis * count + region] lower, [(3 + axis) * count
+                                          // + region] upper: the regions' boxes this epoch
+};
+
+// The region whose box (RegionDrift::box) is nearest to p, and that distance (rounded up).
+uint32_t nearestRegion(const RegionDrift& regions, const Vec3& p, double& distance);
+// The distance from p to a region's box (rounded up).
+double regionDistance(const RegionDrift& regions, uint32_t region, const Vec3& p);
+
 // The geometry a query reads, over a Hierarchy's fixed topology (children, leaf lanes). The
 // Hierarchy provides its rest geometry; deform/ bodies provide per-frame geometry (moved
 // positions, refreshed or inflated bounds) with the same node and leaf layout.
@@ -58,7 +79,10 @@ struct TreeGeometry {
   // nextGeometryVersion() value) whenever that bound is not kept.
   uint64_t lineage = 0;
   double drift = 0;
+  // Optional (deforming bodies, DeformingBody): drift by region, for motion that is local.
+  const RegionDrift* regions = nullptr;
 };
+
 
 // A lineage's drift after a change that moved no vertex farther than `motion`: rounded up, so
 // that the difference of two drift values never falls short of the motion between them, even

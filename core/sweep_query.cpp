@@ -586,8 +586,35 @@ void QueryStream::storeSet(const Vec3& anchor, double set_reach, CoherentState& 
   for (uint32_t i = 0; i < state.count; ++i) state.faces[i] = gathered_[i].second;
   state.anchor = anchor;
   state.reach = set_reach;
-  state.drift_at = geometry().drift;
+  const TreeGeometry& g = geometry();
+  state.drift_at = g.drift;
   state.has_set = set_reach > 0;  // infinite: every face is in the set
+  // Drift by region (movedSinceSet): the region of the set's nearest face, at `best` from the
+  // anchor; an empty set (no face within its reach) keeps its last region of this epoch, else
+  // takes the region whose box is nearest (a scan), at its box's distance.
+  const RegionDrift* regions = g.regions;
+  const bool had_region = regions && state.region_epoch != 0 && state.region_epoch == regions->epoch;
+  state.region_epoch = 0;
+  if (regions && regions->epoch != 0 && state.has_set && set_reach < kInf) {
+    uint32_t region = 0;
+    float best = 0;
+    if (!gathered_.empty()) {
+      region = regions->face_region[gathered_[0].second];
+      best = floatAtLeast(std::sqrt(gathered_[0].first));
+    } else if (had_region) {
+      region = state.region;
+      best = floatAtLeast(regionDistance(*regions, region, anchor));
+    } else {
+      double distance = 0;
+      region = nearestRegion(*regions, anchor, distance);
+      best = floatAtLeast(distance);
+    }
+    state.region_epoch = regions->epoch;
+    state.region = static_cast<uint16_t>(region);
+    state.region_best = best;
+    state.region_at[0] = regions->drift[2 * region];
+    state.region_at[1] = regions->drift[2 * region + 1];
+  }
 }
 
 // Tests a compact state's set at p, `moved` from its anchor (drift included): best2 and face
@@ -631,11 +658,21 @@ void restartState(CoherentState& state) {
   state.lead_steps = lead_steps;
 }
 
+// The drift the state's motion follows: its region's first-level drift while its set has one
+// in the geometry's epoch (`local`), else the lineage's.
+double followedDrift(const CoherentState& state, const TreeGeometry& g, bool& local) {
+  local = g.regions && state.region_epoch != 0 && state.region_epoch == g.regions->epoch;
+  return local ? g.regions->drift[2 * state.region] : g.drift;
+}
+
 // The running means of the point's motion relative to the geometry (its step plus the growth
-// of the lineage's drift), from which a set's reach and lead are taken.
-void trackMotion(CoherentState& state, const Vec3& p, double drift) {
+// of the drift it follows), from which a set's reach and lead are taken.
+void trackMotion(CoherentState& state, const Vec3& p, const TreeGeometry& g) {
   const Vec3 point_step = p - state.last_point;
-  const double step = point_step.norm() + (drift - state.last_drift);
+  bool local = false;
+  const double drift = followedDrift(state, g, local);
+  // A switch between the two drifts (a new epoch) counts the point's step only, once.
+  const double step = point_step.norm() + (local == state.last_local ? drift - state.last_drift : 0.0);
   const Eigen::Vector3f velocity = point_step.cast<float>();
   if (state.mean_step > 0) {
     state.mean_step = 0.9f * state.mean_step + 0.1f * static_cast<float>(step);
@@ -647,9 +684,30 @@ void trackMotion(CoherentState& state, const Vec3& p, double drift) {
 }
 
 // How far the faces may have come toward p since the state's set was gathered: the point's
-// distance from the anchor plus the growth of the lineage's drift.
+// distance from the anchor plus the growth of the lineage's drift. With drift by region
+// (storeSet attached one; `best` bounds the anchor's distance to a point q of the region's
+// box), a face was at least its gathered distance (reach, for one outside the set) from the
+// anchor, and:
+//  - one within the first width of the region moved by at most that level's drift growth;
+//  - one beyond it lies, for the whole epoch, in a region box more than width[0] from q: at
+//    least width[0] - best from the anchor whatever it did (the reach plus slack0), and it
+//    moved by at most the second level's drift growth;
+//  - one beyond the second width, the same with width[1] and the lineage's drift.
+// The result bounds how far any of them may have come within its gathered distance or the
+// reach, which is all the set's test and certificate need (testSet: a face that came closer
+// than that by its box alone is still beyond the reach less this motion).
 double movedSinceSet(const CoherentState& state, const Vec3& p, const TreeGeometry& g) {
-  return (p - state.anchor).norm() + (g.drift - state.drift_at);
+  const double step = (p - state.anchor).norm();
+  const double lineage = g.drift - state.drift_at;
+  const RegionDrift* regions = g.regions;
+  if (!regions || state.region_epoch == 0 || state.region_epoch != regions->epoch) return step + lineage;
+  const double* drift = regions->drift + 2 * state.region;
+  const double near = drift[0] - state.region_at[0];
+  const double middle = drift[1] - state.region_at[1];
+  const double best = static_cast<double>(state.region_best);
+  const double slack0 = regions->width[0] - best - state.reach;
+  const double slack1 = regions->width[1] - best - state.reach;
+  return step + std::max({near, std::min(middle, -slack0), std::min(lineage, -slack1)});
 }
 
 // Where a rebuilt set is gathered: its margin 2R, R = reach_steps mean steps (at least 1e-6 of
@@ -691,11 +749,18 @@ ClosestPoint QueryStream::closestCoherent(const Vec3& p, CoherentState& state, b
   // 1e-15 of the mesh's size) count as within it.
   const double within = cap < kInf ? cap * (1 + 1e-12) + 1e-15 / g.box_scale : kInf;
   const double within2 = within * within;
-  if (same_lineage) trackMotion(state, p, g.drift);
+  if (same_lineage) trackMotion(state, p, g);
   TriangleIndex face = kInvalidIndex;
   bool certified = false;
   double best2 = kInf;
-  if (same_lineage && state.has_set) certified = testSet(state, p, movedSinceSet(state, p, g), within, best2, face);
+  // A set that fails at its first test (the point or the faces near it move by about its
+  // margin each step) costs a gather and saves nothing: the next kClosestWait steps search
+  // from the warm start without one.
+  constexpr uint8_t kClosestWait = 3;
+  const bool tested = same_lineage && state.has_set;
+  if (tested) certified = testSet(state, p, movedSinceSet(state, p, g), within, best2, face);
+  if (certified && state.set_steps < 255) ++state.set_steps;
+  if (!certified && tested && state.set_steps == 0) state.closest_wait = kClosestWait;
   if (!certified) {
     // Start from the best face of the set just tested (no distance to recompute), else the
     // previous face's distance; or the cap if smaller.
@@ -715,7 +780,12 @@ ClosestPoint QueryStream::closestCoherent(const Vec3& p, CoherentState& state, b
       }
     }
     state.has_set = false;
-    if (state.reach_steps > 0) {
+    if (state.closest_wait > 0 && same_lineage) {
+      --state.closest_wait;
+      depthFirst(p, start2, 0, face);
+    } else if (state.reach_steps > 0) {
+      state.closest_wait = 0;
+      state.set_steps = 0;
       const SetPlan plan = planSet(state, g, same_lineage);
       const double reach = plan.reach;
       bool answered = false;
@@ -753,7 +823,7 @@ ClosestPoint QueryStream::closestCoherent(const Vec3& p, CoherentState& state, b
   if (!same_lineage && face == kInvalidIndex) state.last_face = kInvalidIndex;
   state.lineage = g.lineage;
   state.last_point = p;
-  state.last_drift = g.drift;
+  state.last_drift = followedDrift(state, g, state.last_local);
   out.counters = counters_;
   return out;
 }
@@ -798,9 +868,10 @@ void QueryStream::withinCoherent(const Vec3& p, double d, CoherentState& state, 
     return;
   }
   const bool same_lineage = state.lineage != 0 && state.lineage == g.lineage;
-  if (same_lineage) trackMotion(state, p, g.drift);
+  if (same_lineage) trackMotion(state, p, g);
   bool certified = false;
   if (same_lineage && state.has_set) certified = testSetWithin(state, p, movedSinceSet(state, p, g), d, out);
+  if (certified && state.set_steps < 255) ++state.set_steps;
   bool answered = certified;
   // A set that did not certify this step is dropped (it may belong to another lineage, which
   // the state is about to take): only a set gathered now may answer later steps.
@@ -810,6 +881,7 @@ void QueryStream::withinCoherent(const Vec3& p, double d, CoherentState& state, 
       --state.within_wait;
     } else {
       // Gathered within d + 2R (planSet), ahead of p first.
+      state.set_steps = 0;
       const SetPlan plan = planSet(state, g, same_lineage);
       const double radius = d * (1 + 1e-9) + plan.reach;
       TriangleIndex ignored = kInvalidIndex;
@@ -841,7 +913,7 @@ void QueryStream::withinCoherent(const Vec3& p, double d, CoherentState& state, 
   else if (!same_lineage) state.last_face = kInvalidIndex;
   state.lineage = g.lineage;
   state.last_point = p;
-  state.last_drift = g.drift;
+  state.last_drift = followedDrift(state, g, state.last_local);
 }
 
 ClosestPoint QueryStream::closestWithin(const Vec3& p, double tolerance) {

@@ -78,7 +78,17 @@ struct CoherentState {
   Vec3 anchor = Vec3::Zero();        // where the candidate set was gathered
   double reach = 0;                  // every face outside the set was at least this far from anchor
   double drift_at = 0;               // the geometry's drift when the set was gathered
-  double last_drift = 0;             // the geometry's drift at the last query
+  double last_drift = 0;             // the drift the point's motion follows, at the last query
+                                     // (its region's, last_local, or the geometry's)
+  // With drift by region (TreeGeometry::regions): the region of the set's nearest face, that
+  // face's distance from the anchor (rounded up) and the region's drift values at the gather.
+  // The faces within the region's first width then count their own motion, those farther only
+  // once they could come within the set's reach. region_epoch 0: the geometry's drift only.
+  uint64_t region_epoch = 0;
+  double region_at[2] = {0, 0};
+  float region_best = 0;
+  uint16_t region = 0;
+  bool last_local = false;           // last_drift is the region's first-level drift
   uint64_t lineage = 0;              // geometry lineage of the set and last face (0: cold)
   TriangleIndex last_face = kInvalidIndex;  // closest face of the last query (within its cap)
   uint32_t count = 0;                // candidate faces
@@ -88,6 +98,9 @@ struct CoherentState {
                                      // along mean_velocity (when within 2 R; 0: at the point)
   bool has_set = false;              // anchor, reach and faces hold a certificate
   uint8_t within_wait = 0;           // withinCoherent: steps to go before gathering a set again
+  uint8_t closest_wait = 0;          // closestCoherent: steps to go before gathering a set again
+                                     // (the last one failed at its first test: fast motion)
+  uint8_t set_steps = 0;             // steps the set has certified since it was gathered (either mode)
                                      // (the last one could not hold every face within d)
   Vec3 last_point = Vec3::Zero();
   Eigen::Vector3f mean_velocity = Eigen::Vector3f::Zero();  // running mean of the point's steps

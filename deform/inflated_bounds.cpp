@@ -50,6 +50,177 @@ DeformingBody::DeformingBody(std::shared_ptr<const Hierarchy> hierarchy)
   geometry_.box_scale = h.boxScale();
   geometry_.version = nextGeometryVersion();
   geometry_.lineage = geometry_.version;
+  setRegionalDrift(true);
+}
+
+void DeformingBody::setRegionalDrift(bool on) {
+  if (on == regionalDrift()) return;
+  if (on) {
+    setupRegions();
+    newRegionEpoch();
+    return;
+  }
+  geometry_.regions = nullptr;
+  regions_ = RegionDrift{};
+  face_region_ = {};
+  region_vertex_offsets_ = {};
+  region_vertices_ = {};
+  for (int level = 0; level < 2; ++level) {
+    neighbour_offsets_[level] = {};
+    neighbours_[level] = {};
+  }
+  region_drift_ = {};
+  region_motion2_ = {};
+  region_box_ = {};
+  vertex_motion2_ = {};
+}
+
+// The regions: the cells of a grid over the mesh's own positions that hold a face's centroid
+// (cells of 1/16 of the box's diagonal, wider until at most 256 are used), with each face's
+// region and each region's distinct vertices. Compact regions keep the neighbourhoods small;
+// answers do not depend on them (the boxes of each epoch hold whatever positions come).
+void DeformingBody::setupRegions() {
+  const Mesh& mesh = hierarchy_->mesh();
+  constexpr size_t kMaxRegions = 256;
+  const size_t faces = mesh.triangles.size();
+  Vec3 lower, upper;
+  meshBounds(mesh, lower, upper);
+  const double diagonal = (upper - lower).norm();
+  std::vector<Vec3> centroids(faces);
+  for (size_t f = 0; f < faces; ++f) {
+    const Triangle& t = mesh.triangles[f];
+    centroids[f] = (mesh.positions[t[0]] + mesh.positions[t[1]] + mesh.positions[t[2]]) / 3.0;
+  }
+  std::vector<uint64_t> cell(faces, 0), used;
+  if (diagonal > 0 && std::isfinite(diagonal)) {
+    for (double side = diagonal / 16;; side *= 1.25) {
+      for (size_t f = 0; f < faces; ++f) {
+        uint64_t key = 0;
+        for (int axis = 0; axis < 3; ++axis) {
+          const double at = std::floor((centroids[f][axis] - lower[axis]) / side);
+          key = key * 4096 + static_cast<uint64_t>(std::clamp(at, 0.0, 4095.0));
+        }
+        cell[f] = key;
+      }
+      used = cell;
+      std::sort(used.begin(), used.end());
+      used.erase(std::unique(used.begin(), used.end()), used.end());
+      if (used.size() <= kMaxRegions) break;
+    }
+  } else {
+    used.assign(1, 0);  // no extent: one region
+  }
+  const uint32_t count = static_cast<uint32_t>(used.size());
+  face_region_.resize(faces);
+  std::vector<std::vector<VertexIndex>> vertices(count);
+  for (size_t f = 0; f < faces; ++f) {
+    const uint16_t region = static_cast<uint16_t>(std::lower_bound(used.begin(), used.end(), cell[f]) - used.begin());
+    face_region_[f] = region;
+    const Triangle& t = mesh.triangles[f];
+    vertices[region].insert(vertices[region].end(), t.begin(), t.end());
+  }
+  region_vertex_offsets_.assign(static_cast<size_t>(count) + 1, 0);
+  region_vertices_.clear();
+  for (uint32_t region = 0; region < count; ++region) {
+    std::vector<VertexIndex>& list = vertices[region];
+    std::sort(list.begin(), list.end());
+    list.erase(std::unique(list.begin(), list.end()), list.end());
+    region_vertices_.insert(region_vertices_.end(), list.begin(), list.end());
+    region_vertex_offsets_[region + 1] = static_cast<uint32_t>(region_vertices_.size());
+  }
+  region_drift_.assign(2 * static_cast<size_t>(count), 0.0);
+  region_motion2_.assign(count, 0.0);
+  vertex_motion2_.assign(mesh.positions.size(), 0.0f);
+  regions_.face_region = face_region_.data();
+  regions_.count = count;
+  regions_.drift = region_drift_.data();
+  geometry_.regions = &regions_;
+}
+
+// A new epoch of drift by region, for the current anchor positions and displacement bounds:
+// each region's box holds its vertices at any accepted positions (anchor box grown by the
+// region's largest bound, and a rounding margin); the neighbourhoods at 1/16 and 1/4 of the
+// diagonal of all of them list the regions whose boxes come that close (with a relative 1e-9 to
+// spare, so a computed gap never leaves out a region within the width). Running drifts start
+// at zero under a new epoch value: states gathered before stop reading them.
+void DeformingBody::newRegionEpoch() {
+  if (!regionalDrift()) return;
+  const uint32_t count = regions_.count;
+  constexpr double kInf = std::numeric_limits<double>::infinity();
+  std::vector<Vec3> lower(count, Vec3::Constant(kInf)), upper(count, Vec3::Constant(-kInf));
+  Vec3 all_lower = Vec3::Constant(kInf), all_upper = Vec3::Constant(-kInf);
+  for (uint32_t region = 0; region < count; ++region) {
+    double grow = 0;
+    for (uint32_t i = region_vertex_offsets_[region]; i < region_vertex_offsets_[region + 1]; ++i) {
+      const VertexIndex v = region_vertices_[i];
+      lower[region] = lower[region].cwiseMin(anchor_positions_[v]);
+      upper[region] = upper[region].cwiseMax(anchor_positions_[v]);
+      grow = std::max(grow, delta_[v]);
+    }
+    const double extent = std::max(lower[region].cwiseAbs().maxCoeff(), upper[region].cwiseAbs().maxCoeff());
+    const double margin = grow * (1 + 1e-9) + 1e-12 * (extent + grow);
+    lower[region].array() -= margin;
+    upper[region].array() += margin;
+    all_lower = all_lower.cwiseMin(lower[region]);
+    all_upper = all_upper.cwiseMax(upper[region]);
+  }
+  region_box_.resize(6 * static_cast<size_t>(count));
+  for (uint32_t region = 0; region < count; ++region)
+    for (int axis = 0; axis < 3; ++axis) {
+      region_box_[axis * count + region] = lower[region][axis];
+      region_box_[(3 + axis) * count + region] = upper[region][axis];
+    }
+  regions_.box = region_box_.data();
+  const double diagonal = (all_upper - all_lower).norm();
+  regions_.width[0] = diagonal / 16;
+  regions_.width[1] = diagonal / 4;
+  for (int level = 0; level < 2; ++level) {
+    const double reach = regions_.width[level] * (1 + 1e-9);
+    std::vector<uint32_t>& offsets = neighbour_offsets_[level];
+    std::vector<uint16_t>& list = neighbours_[level];
+    offsets.assign(static_cast<size_t>(count) + 1, 0);
+    list.clear();
+    for (uint32_t region = 0; region < count; ++region) {
+      for (uint32_t other = 0; other < count; ++other) {
+        const Vec3 gap = (lower[other] - upper[region]).cwiseMax(lower[region] - upper[other]).cwiseMax(0.0);
+        if (!(gap.norm() > reach)) list.push_back(static_cast<uint16_t>(other));
+      }
+      offsets[region + 1] = static_cast<uint32_t>(list.size());
+    }
+  }
+  std::fill(region_drift_.begin(), region_drift_.end(), 0.0);
+  regions_.epoch = nextGeometryVersion();
+}
+
+// Each region's running drifts grow by how far the farthest vertex of its neighbourhoods moved
+// in this change (vertex_motion2_, from setPositions).
+void DeformingBody::growRegionDrift() {
+  if (!regionalDrift()) return;
+  const uint32_t count = regions_.count;
+  const float* motion2 = vertex_motion2_.data();
+  for (uint32_t region = 0; region < count; ++region) {
+    float moved2 = 0;
+    for (uint32_t i = region_vertex_offsets_[region]; i < region_vertex_offsets_[region + 1]; ++i)
+      moved2 = std::max(moved2, motion2[region_vertices_[i]]);
+    region_motion2_[region] = moved2;
+  }
+  // A neighbourhood of most regions takes the largest motion of all (an upper bound of its
+  // own); a scan stops once it meets it.
+  const double largest = *std::max_element(region_motion2_.begin(), region_motion2_.end());
+  for (int level = 0; level < 2; ++level) {
+    const std::vector<uint32_t>& offsets = neighbour_offsets_[level];
+    const std::vector<uint16_t>& list = neighbours_[level];
+    for (uint32_t region = 0; region < count; ++region) {
+      double moved2 = largest;
+      if (2 * (offsets[region + 1] - offsets[region]) <= count) {
+        moved2 = 0;
+        for (uint32_t i = offsets[region]; i < offsets[region + 1] && moved2 < largest; ++i)
+          moved2 = std::max(moved2, region_motion2_[list[i]]);
+      }
+      double& drift = region_drift_[2 * static_cast<size_t>(region) + level];
+      drift = grownDrift(drift, std::sqrt(moved2));
+    }
+  }
 }
 
 void DeformingBody::setInlineFaces(bool on) {
@@ -109,6 +280,7 @@ void DeformingBody::anchor(const std::vector<Vec3>& positions) {
   nodes_ = anchor_nodes_;
   refreshInlineFaces();
   std::fill(delta_.begin(), delta_.end(), 0.0);
+  newRegionEpoch();
   geometry_.version = nextGeometryVersion();
   geometry_.lineage = geometry_.version;  // positions replaced: coherent state starts over
 }
@@ -184,6 +356,7 @@ void DeformingBody::inflate(const std::vector<double>& delta) {
     geometry_.lineage = nextGeometryVersion();  // positions replaced: coherent state starts over
   }
   refreshInlineFaces();
+  newRegionEpoch();  // the regions' boxes grew
   geometry_.version = nextGeometryVersion();
 }
 
@@ -195,15 +368,19 @@ DisplacementCheck DeformingBody::setPositions(const std::vector<Vec3>& positions
   // 1e-12 to spare), and how far the farthest vertex moves (the lineage's drift grows by that).
   // NaN fails every comparison, so it is caught by `finite`.
   // The same pass takes the positions' box, for the extent check.
+  // With drift by region it also keeps each vertex's squared motion, rounded up.
   bool finite = true, suspect = false;
   double moved2 = 0;
   Vec3 lower = Vec3::Constant(std::numeric_limits<double>::infinity()), upper = -lower;
+  float* motion2 = regionalDrift() ? vertex_motion2_.data() : nullptr;
   for (size_t v = 0; v < positions.size(); ++v) {
     const Vec3 d = positions[v] - anchor_positions_[v];
     const double d2 = d.squaredNorm();
     finite &= inCoordinateRange(positions[v]);
     suspect |= d2 > delta_[v] * delta_[v] * (1 - 1e-12);
-    moved2 = std::max(moved2, (positions[v] - positions_[v]).squaredNorm());
+    const double step2 = (positions[v] - positions_[v]).squaredNorm();
+    moved2 = std::max(moved2, step2);
+    if (motion2) motion2[v] = floatAtLeast(step2);
     lower = lower.cwiseMin(positions[v]);
     upper = upper.cwiseMax(positions[v]);
   }
@@ -222,6 +399,7 @@ DisplacementCheck DeformingBody::setPositions(const std::vector<Vec3>& positions
   }
   if (!check.accepted) return check;
   checkExtent((upper - lower).norm(), "positions");
+  if (moved2 > 0) growRegionDrift();
   positions_ = positions;
   refreshInlineFaces();
   geometry_.version = nextGeometryVersion();

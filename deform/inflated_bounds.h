@@ -68,6 +68,17 @@ class DeformingBody {
   void setInlineFaces(bool on);
   bool inlineFaces() const { return geometry_.leaf_blocks != nullptr; }
 
+  // Drift by region (TreeGeometry::regions): the faces are split into up to 256 regions of
+  // nearby faces (grid cells over the mesh's own positions), and each setPositions also tracks how far the vertices
+  // of each region's neighbourhood moved (within 1/16 and 1/4 of the anchor box's diagonal).
+  // A coherent state near a part that stays still then keeps its certificate while another
+  // part moves fast (a character's waving arm under a cloth resting on its torso), where the
+  // lineage's drift alone would count the arm's motion everywhere. Costs a pass over the
+  // regions' vertices in each setPositions that moves them, and an O(regions^2) pass in each
+  // anchor() and inflate(). On by default; off: the lineage's drift only.
+  void setRegionalDrift(bool on);
+  bool regionalDrift() const { return geometry_.regions != nullptr; }
+
   // What queries read (QueryStream::setGeometry); valid until the body is destroyed.
   const TreeGeometry& geometry() const { return geometry_; }
   const std::vector<Vec3>& positions() const { return positions_; }
@@ -92,6 +103,20 @@ class DeformingBody {
   std::vector<TriangleBlock8> leaf_blocks_;  // [leaf] faces at positions_ (setInlineFaces)
   bool radii_ = true;                        // anchor() computes eps (setRadii)
   void refreshInlineFaces();
+  // Drift by region (setRegionalDrift).
+  void setupRegions();
+  void newRegionEpoch();
+  void growRegionDrift();
+  std::vector<uint16_t> face_region_;            // [face]
+  std::vector<uint32_t> region_vertex_offsets_;  // CSR: region r's distinct vertices
+  std::vector<VertexIndex> region_vertices_;
+  std::vector<uint32_t> neighbour_offsets_[2];   // CSR per level: the regions within width[k]
+  std::vector<uint16_t> neighbours_[2];
+  std::vector<double> region_drift_;             // [2 * region + level]
+  std::vector<double> region_motion2_;           // [region] scratch: squared motion of a change
+  std::vector<double> region_box_;               // RegionDrift::box
+  std::vector<float> vertex_motion2_;            // [vertex] squared motion of the last change, rounded up
+  RegionDrift regions_;
   TreeGeometry geometry_;
 };
 

@@ -532,6 +532,45 @@ TEST_CASE("coherent queries: sets gathered ahead of a moving point", "[coherent]
   }
 }
 
+// A point whose motion outruns the sets it gathers (every fourth step a jump of 0.2 along the
+// ring and back, so a set gathered at either end fails at its first test) searches from its
+// warm start without gathering for the next three steps after such a failure, then tries
+// again: a gather that saves nothing is not repeated at every step. Every answer exact.
+TEST_CASE("coherent queries: a point too fast for its sets", "[coherent]") {
+  const Mesh mesh = scenes::torus(1.0, 0.3, 96, 48);
+  const auto h = Hierarchy::build(mesh);
+  const Checker checker{mesh, meshDiagonal(mesh)};
+  QueryStream stream(h);
+  CoherentState state;
+  Failures f("closestCoherent(p, CoherentState) on a jumping point");
+  Failures waiting("no gather within three steps of a set that failed at its first test");
+  size_t failed_first = 0, plain = 0;
+  int no_gather = 0;  // steps left that must not gather
+  for (int i = 0; i < 200; ++i) {
+    const double angle = 0.004 * i + (i % 4 == 3 ? 0.2 : 0.0);
+    const Vec3 p(std::cos(angle), std::sin(angle), 0.3 + 0.01);
+    INFO("step " << i << ", point " << text(p));
+    const bool fresh = state.has_set && state.set_steps == 0;  // gathered last step
+    bool certified = false;
+    const ClosestPoint r = stream.closestCoherent(p, state, &certified);
+    checker.exact(r, p, Truth{bruteForceKClosest(mesh, p, 1)}, f);
+    const bool gathered = !certified && state.has_set;
+    plain += !certified && !state.has_set;
+    if (no_gather > 0) {
+      waiting.check(!gathered, [&] { return "step " + std::to_string(i) + " gathered a set"; });
+      --no_gather;
+    }
+    if (fresh && !certified) {  // failed at its first test: this step and the next two search plainly
+      ++failed_first;
+      waiting.check(!gathered, [&] { return "step " + std::to_string(i) + " gathered a set"; });
+      no_gather = 2;
+    }
+  }
+  INFO(failed_first << " sets failed at their first test, " << plain << " plain searches");
+  CHECK(failed_first > 20);
+  CHECK(plain >= 3 * failed_first);
+}
+
 // withinCoherent answers from a compact state's set while its certificate holds: the same faces,
 // hits and order as within() (bitwise) at every step, along paths with a radius that changes
 // every step (sometimes 0, sometimes so large that no set can hold the faces within it, NaN,

@@ -1051,3 +1051,280 @@ TEST_CASE("deform: a stationary coherent point is certified", "[deform]") {
   for (int i = 0; i < 10; ++i) stream.closestCoherent(p);
   CHECK(stream.coherence().certified == 10);
 }
+
+// ---- Drift by region ------------------------------------------------------------------------
+
+namespace {
+
+// A sphere whose cap beyond x = 0.6 (the "arm") swings along z by up to `amplitude`, blended
+// over x in [0.5, 0.6]; the rest stays.
+std::vector<Vec3> swingArm(const Mesh& mesh, double amplitude, int step) {
+  std::vector<Vec3> out = mesh.positions;
+  for (Vec3& x : out) {
+    const double weight = std::clamp((x.x() - 0.5) / 0.1, 0.0, 1.0);
+    x.z() += weight * amplitude * std::sin(0.5 * step);
+  }
+  return out;
+}
+
+// Closest (capped and not) and within answers of coherent states against brute force while the
+// arm swings; returns the fraction certified among the points far from the arm (x < -0.95) and
+// the triangles their closest queries tested.
+struct ArmRun {
+  double far_certified = 0;
+  uint64_t far_triangles = 0;
+};
+ArmRun swingingArmRun(bool regional, double amplitude, Failures& closest, Failures& within) {
+  const Mesh mesh = scenes::icosphere(4, 1.0);
+  const auto h = Hierarchy::build(mesh);
+  DeformingBody body(h);
+  body.setRegionalDrift(regional);
+  CHECK(body.regionalDrift() == regional);
+  std::vector<double> bounds(mesh.positions.size(), 0.0);  // the arm may move 0.2, the rest not
+  for (size_t v = 0; v < bounds.size(); ++v) bounds[v] = mesh.positions[v].x() > 0.5 ? 0.2 : 0.0;
+  body.inflate(bounds);
+  QueryStream stream(h);
+  stream.setGeometry(&body.geometry());
+  Random random(17);
+  std::vector<Vec3> points;
+  for (int i = 0; i < 240; ++i) {
+    const Vec3 n = randomUnit(random);
+    const double offset = i % 3 == 0 ? 0.0 : (i % 3 == 1 ? random.uniform(-0.02, 0.02) : random.uniform(0.05, 0.3));
+    points.push_back(n * (1 + offset));
+  }
+  std::vector<CoherentState> states(points.size()), within_states(points.size());
+  const double d = 0.03;
+  const Checker checker{mesh, 2 * std::sqrt(3.0), 1e-14};
+  size_t far = 0, far_certified = 0;
+  ArmRun run;
+  std::vector<TriangleHit> got;
+  for (int step = 1; step <= 30; ++step) {
+    const std::vector<Vec3> x = swingArm(mesh, amplitude, step);  // 0.2: up to 0.1 a step
+    REQUIRE(body.setPositions(x).accepted);
+    const Mesh current = withPositions(mesh, x);
+    const Checker check{current, checker.diagonal, checker.absolute};
+    for (size_t i = 0; i < points.size(); ++i) {
+      const Vec3 p = points[i] + Vec3(0.0005 * step, 0, 0);
+      INFO("step " << step << " point " << i << " " << text(p));
+      bool certified = false;
+      const double cap = i % 2 ? 0.04 : std::numeric_limits<double>::infinity();
+      const ClosestPoint c = stream.closestCoherent(p, states[i], &certified, cap);
+      const BruteHit truth = bruteForceClosest(current, p);
+      if (truth.distance <= cap) {
+        check.exact(c, p, truth, closest);
+      } else {
+        closest.check(c.triangle == kInvalidIndex, [&] { return "a face beyond the cap: " + num(c.distance); });
+      }
+      if (step > 2 && p.x() < -0.95) {
+        ++far;
+        far_certified += certified;
+        run.far_triangles += stream.counters().triangles_tested;
+      }
+      stream.withinCoherent(p, d, within_states[i], got);
+      check.hits(got, bruteForceWithin(current, p, d), p, within);
+    }
+  }
+  run.far_certified = static_cast<double>(far_certified) / static_cast<double>(far);
+  return run;
+}
+
+}  // namespace
+
+// A part that moves fast (an arm swinging up to 0.1 a step, 5% of the sphere's diameter) counts
+// in full in the certificates of the points near it only: far from it, states keep small sets
+// and rebuild less (a sixth of the triangles tested here), where the lineage's drift alone
+// makes every set hold faces within the arm's motion. Exact either way.
+TEST_CASE("drift by region: a swinging arm leaves the certificates elsewhere", "[deform][regions]") {
+  Failures closest("closestCoherent with drift by region"), within("withinCoherent with drift by region");
+  const ArmRun with_regions = swingingArmRun(true, 0.2, closest, within);
+  Failures closest_off("closestCoherent, lineage drift only"), within_off("withinCoherent, lineage drift only");
+  const ArmRun without = swingingArmRun(false, 0.2, closest_off, within_off);
+  INFO("far from the arm: certified " << with_regions.far_certified << " with regions, " << without.far_certified
+                                      << " without; triangles tested " << with_regions.far_triangles << ", "
+                                      << without.far_triangles);
+  CHECK(with_regions.far_certified > without.far_certified);
+  CHECK(with_regions.far_triangles * 3 < without.far_triangles);
+}
+
+// The certificates' outer levels: faces beyond a region's neighbourhoods move by the lineage's
+// drift. A small triangle far away (beyond both widths, then within the second only) jumps in
+// steps of 0.15 toward a point certified over a still plane until it lies between them; a long
+// sliver whose centroid is far but which passes over the point dips toward it. Both may move
+// 0.2 from their anchor, so the body re-anchors (a new epoch) every step or two. Every step
+// exact.
+TEST_CASE("drift by region: far faces that come close are seen", "[deform][regions]") {
+  for (const double start_x : {3.0, 1.2}) {
+    INFO("the triangle starts at x = " << start_x);
+    Mesh mesh = scenes::gridPlane(24, 4.0);  // z = 0 over [-2, 2]^2
+    const VertexIndex base = static_cast<VertexIndex>(mesh.positions.size());
+    const Vec3 far(start_x, 0, 0.3);
+    mesh.positions.push_back(far + Vec3(-0.01, -0.01, 0));
+    mesh.positions.push_back(far + Vec3(0.01, -0.01, 0));
+    mesh.positions.push_back(far + Vec3(0, 0.01, 0));
+    mesh.triangles.push_back({base, base + 1, base + 2});
+    // The sliver: from the far corner to past the point, high above the plane.
+    mesh.positions.push_back(Vec3(2, 2, 0.5));
+    mesh.positions.push_back(Vec3(2, 2.001, 0.5));
+    mesh.positions.push_back(Vec3(-0.3, -0.3, 0.5));
+    mesh.triangles.push_back({base + 3, base + 4, base + 5});
+    std::vector<double> bounds(mesh.positions.size(), 0.0);
+    for (VertexIndex v = base; v < base + 6; ++v) bounds[v] = 0.2;
+    const auto h = Hierarchy::build(mesh);
+    DeformingBody body(h);
+    body.inflate(bounds);
+    REQUIRE(body.geometry().regions);
+    INFO("widths " << body.geometry().regions->width[0] << ", " << body.geometry().regions->width[1]);
+    QueryStream stream(h);
+    stream.setGeometry(&body.geometry());
+    const Vec3 p(0.01, 0.02, 0.05);
+    CoherentState state;
+    Failures f("closestCoherent as far faces come close");
+    std::vector<Vec3> x = mesh.positions;
+    size_t certified_steps = 0, reanchors = 0;
+    bool reached = false;
+    for (int step = 0; step < 60; ++step) {
+      if (step >= 10) {  // the triangle jumps toward the point, to 0.03 below it
+        const Vec3 target = p + Vec3(0, 0, -0.03);
+        const Vec3 centre = (x[base] + x[base + 1] + x[base + 2]) / 3.0;
+        const Vec3 to = target - centre;
+        const Vec3 move = to.norm() > 0.15 ? Vec3(0.15 * to.normalized()) : to;
+        for (int k = 0; k < 3; ++k) x[base + k] += move;
+        reached |= (target - (centre + move)).norm() < 1e-9;
+      }
+      if (step >= 30) x[base + 5].z() = std::max(0.5 - 0.02 * (step - 29), 0.03);  // the sliver dips
+      if (!body.setPositions(x).accepted) {
+        body.reanchor(x);
+        body.inflate(bounds);
+        ++reanchors;
+      }
+      const Mesh current = withPositions(mesh, x);
+      const Vec3 q = p + Vec3(1e-5 * step, 0, 0);
+      bool certified = false;
+      const ClosestPoint got = stream.closestCoherent(q, state, &certified);
+      certified_steps += certified;
+      const BruteHit truth = bruteForceClosest(current, q);
+      f.check(std::abs(got.distance - truth.distance) <= 1e-12 * truth.distance && got.triangle == truth.triangle, [&] {
+        return "step " + std::to_string(step) + ": " + num(got.distance) + " (triangle " + std::to_string(got.triangle) +
+               "), brute force " + num(truth.distance) + " (triangle " + std::to_string(truth.triangle) + ")";
+      });
+    }
+    CHECK(reached);
+    CHECK(reanchors >= 5);
+    CHECK(certified_steps > 10);  // certified while the far faces were far
+    CHECK(f.checks() == 60);
+  }
+}
+
+// The outer levels with a point farther from the surface than a width: a small triangle above
+// a still plane comes down toward a point over the plane (within one epoch, its box beyond the
+// point's first neighbourhood, then beyond both) until it is nearer than the plane. The
+// certificate must count its motion by the level's drift (a check that skipped a level answers
+// the plane).
+TEST_CASE("drift by region: a face beyond a width comes down on a high point", "[deform][regions]") {
+  struct Case {
+    double point_z, from_z, to_z;
+    int level;  // the first width the point's height exceeds
+  };
+  for (const Case& c : {Case{0.6, 1.9, 1.1, 0}, Case{2.0, 4.4, 3.85, 1}}) {
+    INFO("point at z = " << c.point_z << ", triangle from z = " << c.from_z << " to " << c.to_z);
+    Mesh mesh = scenes::gridPlane(24, 4.0);
+    const VertexIndex base = static_cast<VertexIndex>(mesh.positions.size());
+    const TriangleIndex triangle = static_cast<TriangleIndex>(mesh.triangles.size());
+    mesh.positions.push_back(Vec3(-0.05, -0.05, c.from_z));
+    mesh.positions.push_back(Vec3(0.05, -0.05, c.from_z));
+    mesh.positions.push_back(Vec3(0, 0.05, c.from_z));
+    mesh.triangles.push_back({base, base + 1, base + 2});
+    std::vector<double> bounds(mesh.positions.size(), 0.0);
+    for (VertexIndex v = base; v < base + 3; ++v) bounds[v] = c.from_z - c.to_z + 0.01;
+    const auto h = Hierarchy::build(mesh);
+    DeformingBody body(h);
+    body.inflate(bounds);
+    const RegionDrift* regions = body.geometry().regions;
+    REQUIRE(regions);
+    INFO("widths " << regions->width[0] << ", " << regions->width[1]);
+    REQUIRE(regions->width[c.level] < c.point_z);
+    if (c.level == 0) REQUIRE(regions->width[1] > c.point_z);
+    const uint64_t epoch = regions->epoch;
+    QueryStream stream(h);
+    stream.setGeometry(&body.geometry());
+    CoherentState state, within_state;
+    Failures f("closestCoherent as the triangle comes down"), w("withinCoherent as the triangle comes down");
+    std::vector<Vec3> x = mesh.positions;
+    size_t certified_steps = 0;
+    std::vector<TriangleHit> got;
+    TriangleIndex last = kInvalidIndex;
+    for (int step = 0; step <= 40; ++step) {
+      const double z = step < 10 ? c.from_z : std::max(c.to_z, c.from_z - 0.05 * (step - 9));
+      for (VertexIndex v = base; v < base + 3; ++v) x[v].z() = z;
+      REQUIRE(body.setPositions(x).accepted);
+      const Mesh current = withPositions(mesh, x);
+      const Vec3 p(0.001 + 1e-6 * step, 0.002, c.point_z);
+      bool certified = false;
+      const ClosestPoint r = stream.closestCoherent(p, state, &certified);
+      certified_steps += certified;
+      const BruteHit truth = bruteForceClosest(current, p);
+      last = truth.triangle;
+      f.check(std::abs(r.distance - truth.distance) <= 1e-12 * truth.distance && r.triangle == truth.triangle, [&] {
+        return "step " + std::to_string(step) + ": " + num(r.distance) + " (triangle " + std::to_string(r.triangle) +
+               "), brute force " + num(truth.distance) + " (triangle " + std::to_string(truth.triangle) + ")";
+      });
+      const double d = c.point_z + 0.01;
+      stream.withinCoherent(p, d, within_state, got);
+      const std::vector<BruteHit> all = bruteForceWithin(current, p, d);
+      w.check(got.size() == all.size(), [&] {
+        return "step " + std::to_string(step) + ": " + std::to_string(got.size()) + " faces, brute force " +
+               std::to_string(all.size());
+      });
+    }
+    CHECK(body.geometry().regions->epoch == epoch);  // one epoch throughout
+    CHECK(last == triangle);                         // the triangle ends nearest
+    CHECK(certified_steps > 10);
+  }
+}
+
+// A new epoch (inflate, anchor) restarts the running drifts; states gathered before fall back
+// to the lineage's drift, still exact.
+TEST_CASE("drift by region: new epochs", "[deform][regions]") {
+  const Mesh mesh = scenes::icosphere(3, 1.0);
+  const auto h = Hierarchy::build(mesh);
+  DeformingBody body(h);
+  body.inflate(0.05);
+  REQUIRE(body.geometry().regions);
+  const uint64_t epoch = body.geometry().regions->epoch;
+  CHECK(epoch != 0);
+  CHECK(body.geometry().regions->count >= 8);
+  CHECK(body.geometry().regions->width[0] <= body.geometry().regions->width[1]);
+  QueryStream stream(h);
+  stream.setGeometry(&body.geometry());
+  Random random(3);
+  std::vector<Vec3> points;
+  for (int i = 0; i < 100; ++i) points.push_back(randomUnit(random) * random.uniform(0.9, 1.1));
+  std::vector<CoherentState> states(points.size());
+  Failures f("closestCoherent across epochs");
+  for (int step = 1; step <= 20; ++step) {
+    const std::vector<Vec3> x = swingArm(mesh, 0.04, step);
+    if (step == 8) body.inflate(0.06);  // a new epoch, the same lineage
+    if (step == 14) {
+      const double drift = body.geometry().drift;
+      body.reanchor(x);
+      body.inflate(0.06);
+      CHECK(body.geometry().drift > drift);
+    } else {
+      REQUIRE(body.setPositions(x).accepted);
+    }
+    if (step == 8 || step == 14) CHECK(body.geometry().regions->epoch != epoch);
+    const Mesh current = withPositions(mesh, x);
+    for (size_t i = 0; i < points.size(); ++i) {
+      const ClosestPoint c = stream.closestCoherent(points[i], states[i]);
+      const BruteHit truth = bruteForceClosest(current, points[i]);
+      f.check(std::abs(c.distance - truth.distance) <= 1e-12 * truth.distance, [&] {
+        return "step " + std::to_string(step) + ": " + num(c.distance) + ", brute force " + num(truth.distance);
+      });
+    }
+  }
+  CHECK(f.checks() == 20 * points.size());
+  body.setRegionalDrift(false);
+  CHECK(body.geometry().regions == nullptr);
+  body.setRegionalDrift(true);
+  CHECK(body.geometry().regions != nullptr);
+}
