@@ -189,14 +189,24 @@ void DeformingBody::newRegionEpoch() {
     }
   }
   std::fill(region_drift_.begin(), region_drift_.end(), 0.0);
+  uniform_skips_ = 0;
   regions_.epoch = nextGeometryVersion();
 }
 
 // Each region's running drifts grow by how far the farthest vertex of its neighbourhoods moved
-// in this change (vertex_motion2_, from setPositions).
-void DeformingBody::growRegionDrift() {
+// in this change (`by_region`: from vertex_motion2_, which setPositions filled), or by the
+// largest motion of all (`largest`, an upper bound of every region's). A change where nine
+// regions in ten saw their first neighbourhood move by half the largest or more (a wave over
+// the whole body) gains nothing from regions: the next kUniformSkips changes skip the
+// per-region pass and take the largest, then a change measures again.
+void DeformingBody::growRegionDrift(bool by_region, double largest) {
   if (!regionalDrift()) return;
   const uint32_t count = regions_.count;
+  if (!by_region) {
+    for (double& drift : region_drift_) drift = grownDrift(drift, largest);
+    --uniform_skips_;
+    return;
+  }
   const float* motion2 = vertex_motion2_.data();
   for (uint32_t region = 0; region < count; ++region) {
     float moved2 = 0;
@@ -206,21 +216,25 @@ void DeformingBody::growRegionDrift() {
   }
   // A neighbourhood of most regions takes the largest motion of all (an upper bound of its
   // own); a scan stops once it meets it.
-  const double largest = *std::max_element(region_motion2_.begin(), region_motion2_.end());
+  const double largest2 = *std::max_element(region_motion2_.begin(), region_motion2_.end());
+  uint32_t uniform = 0;  // regions whose first neighbourhood moved by half the largest or more
   for (int level = 0; level < 2; ++level) {
     const std::vector<uint32_t>& offsets = neighbour_offsets_[level];
     const std::vector<uint16_t>& list = neighbours_[level];
     for (uint32_t region = 0; region < count; ++region) {
-      double moved2 = largest;
+      double moved2 = largest2;
       if (2 * (offsets[region + 1] - offsets[region]) <= count) {
         moved2 = 0;
-        for (uint32_t i = offsets[region]; i < offsets[region + 1] && moved2 < largest; ++i)
+        for (uint32_t i = offsets[region]; i < offsets[region + 1] && moved2 < largest2; ++i)
           moved2 = std::max(moved2, region_motion2_[list[i]]);
       }
+      if (level == 0) uniform += moved2 >= 0.25 * largest2;
       double& drift = region_drift_[2 * static_cast<size_t>(region) + level];
       drift = grownDrift(drift, std::sqrt(moved2));
     }
   }
+  constexpr int kUniformSkips = 7;
+  if (10 * uniform >= 9 * count) uniform_skips_ = kUniformSkips;
 }
 
 void DeformingBody::setInlineFaces(bool on) {
@@ -372,7 +386,9 @@ DisplacementCheck DeformingBody::setPositions(const std::vector<Vec3>& positions
   bool finite = true, suspect = false;
   double moved2 = 0;
   Vec3 lower = Vec3::Constant(std::numeric_limits<double>::infinity()), upper = -lower;
-  float* motion2 = regionalDrift() ? vertex_motion2_.data() : nullptr;
+  // (Skipped while the motion is uniform: growRegionDrift then grows every region by the largest.)
+  const bool by_region = regionalDrift() && uniform_skips_ == 0;
+  float* motion2 = by_region ? vertex_motion2_.data() : nullptr;
   for (size_t v = 0; v < positions.size(); ++v) {
     const Vec3 d = positions[v] - anchor_positions_[v];
     const double d2 = d.squaredNorm();
@@ -399,7 +415,7 @@ DisplacementCheck DeformingBody::setPositions(const std::vector<Vec3>& positions
   }
   if (!check.accepted) return check;
   checkExtent((upper - lower).norm(), "positions");
-  if (moved2 > 0) growRegionDrift();
+  if (moved2 > 0) growRegionDrift(by_region, std::sqrt(moved2));
   positions_ = positions;
   refreshInlineFaces();
   geometry_.version = nextGeometryVersion();

@@ -106,7 +106,7 @@ class DeformingBody {
   // Drift by region (setRegionalDrift).
   void setupRegions();
   void newRegionEpoch();
-  void growRegionDrift();
+  void growRegionDrift(bool by_region, double largest);
   std::vector<uint16_t> face_region_;            // [face]
   std::vector<uint32_t> region_vertex_offsets_;  // CSR: region r's distinct vertices
   std::vector<VertexIndex> region_vertices_;
@@ -116,6 +116,7 @@ class DeformingBody {
   std::vector<double> region_motion2_;           // [region] scratch: squared motion of a change
   std::vector<double> region_box_;               // RegionDrift::box
   std::vector<float> vertex_motion2_;            // [vertex] squared motion of the last change, rounded up
+  int uniform_skips_ = 0;                        // changes left that skip the per-region pass
   RegionDrift regions_;
   TreeGeometry geometry_;
 };

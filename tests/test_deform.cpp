@@ -1282,6 +1282,60 @@ TEST_CASE("drift by region: a face beyond a width comes down on a high point", "
   }
 }
 
+// A motion over the whole body (a wave) gains nothing from regions: after a change that shows
+// it, the next changes grow every region's drifts by the largest motion (no per-region pass);
+// once only the arm moves, the regions far from it stop growing again. Exact throughout.
+TEST_CASE("drift by region: uniform motion takes the largest, local motion the regions", "[deform][regions]") {
+  const Mesh mesh = scenes::icosphere(4, 1.0);
+  const auto h = Hierarchy::build(mesh);
+  DeformingBody body(h);
+  body.inflate(0.2);
+  const RegionDrift* regions = body.geometry().regions;
+  REQUIRE(regions);
+  // A face far from the arm (x = -1) and its region's first-level drift.
+  TriangleIndex far_face = 0;
+  for (TriangleIndex f = 0; f < mesh.triangles.size(); ++f)
+    if (mesh.positions[mesh.triangles[f][0]].x() < mesh.positions[mesh.triangles[far_face][0]].x()) far_face = f;
+  const uint16_t far_region = regions->face_region[far_face];
+  auto far_drift = [&] { return body.geometry().regions->drift[2 * far_region]; };
+  QueryStream stream(h);
+  stream.setGeometry(&body.geometry());
+  Random random(31);
+  std::vector<Vec3> points;
+  for (int i = 0; i < 150; ++i) points.push_back(randomUnit(random) * random.uniform(0.95, 1.05));
+  std::vector<CoherentState> states(points.size());
+  Failures f("closestCoherent, uniform then local motion");
+  double wave_far = 0, wave_all = 0, arm_far = 0, arm_all = 0;
+  for (int step = 1; step <= 30; ++step) {
+    std::vector<Vec3> x = step <= 12 ? wave(mesh, 0.05, 1.0, Vec3(1, 0.3, 0.2).normalized(), 0.4 * step)
+                                     : swingArm(mesh, 0.1, step);
+    const double far_before = far_drift(), all_before = body.geometry().drift;
+    REQUIRE(body.setPositions(x).accepted);
+    const double far_growth = far_drift() - far_before, all_growth = body.geometry().drift - all_before;
+    if (step >= 3 && step <= 12) {
+      wave_far += far_growth;
+      wave_all += all_growth;
+    }
+    if (step >= 21) {  // past the uniform changes' skips
+      arm_far += far_growth;
+      arm_all += all_growth;
+    }
+    const Mesh current = withPositions(mesh, x);
+    for (size_t i = 0; i < points.size(); ++i) {
+      const ClosestPoint c = stream.closestCoherent(points[i], states[i]);
+      const BruteHit truth = bruteForceClosest(current, points[i]);
+      f.check(std::abs(c.distance - truth.distance) <= 1e-12 * truth.distance, [&] {
+        return "step " + std::to_string(step) + ": " + num(c.distance) + ", brute force " + num(truth.distance);
+      });
+    }
+  }
+  INFO("far region's drift growth " << wave_far << " of " << wave_all << " (wave), " << arm_far << " of " << arm_all
+                                     << " (arm)");
+  CHECK(wave_far >= 0.95 * wave_all);  // the wave: every region took (about) the largest motion
+  CHECK(arm_far < 0.01 * arm_all);  // the arm alone: the far region stays
+  CHECK(f.checks() == 30 * points.size());
+}
+
 // A new epoch (inflate, anchor) restarts the running drifts; states gathered before fall back
 // to the lineage's drift, still exact.
 TEST_CASE("drift by region: new epochs", "[deform][regions]") {
