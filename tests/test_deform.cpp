@@ -1067,6 +1067,26 @@ std::vector<Vec3> swingArm(const Mesh& mesh, double amplitude, int step) {
   return out;
 }
 
+// n points at random directions, at distances in [low, high] from the origin.
+std::vector<Vec3> pointsAround(uint64_t seed, size_t n, double low, double high) {
+  Random random(seed);
+  std::vector<Vec3> points;
+  for (size_t i = 0; i < n; ++i) points.push_back(randomUnit(random) * random.uniform(low, high));
+  return points;
+}
+
+// Every state's closestCoherent at its point against brute force on `current`.
+void checkStates(QueryStream& stream, const Mesh& current, const std::vector<Vec3>& points,
+                 std::vector<CoherentState>& states, int step, Failures& f) {
+  for (size_t i = 0; i < points.size(); ++i) {
+    const ClosestPoint c = stream.closestCoherent(points[i], states[i]);
+    const BruteHit truth = bruteForceClosest(current, points[i]);
+    f.check(std::abs(c.distance - truth.distance) <= 1e-12 * truth.distance, [&] {
+      return "step " + std::to_string(step) + ": " + num(c.distance) + ", brute force " + num(truth.distance);
+    });
+  }
+}
+
 // Closest (capped and not) and within answers of coherent states against brute force while the
 // arm swings; returns the fraction certified among the points far from the arm (x < -0.95) and
 // the triangles their closest queries tested.
@@ -1300,9 +1320,7 @@ TEST_CASE("drift by region: uniform motion takes the largest, local motion the r
   auto far_drift = [&] { return body.geometry().regions->drift[2 * far_region]; };
   QueryStream stream(h);
   stream.setGeometry(&body.geometry());
-  Random random(31);
-  std::vector<Vec3> points;
-  for (int i = 0; i < 150; ++i) points.push_back(randomUnit(random) * random.uniform(0.95, 1.05));
+  const std::vector<Vec3> points = pointsAround(31, 150, 0.95, 1.05);
   std::vector<CoherentState> states(points.size());
   Failures f("closestCoherent, uniform then local motion");
   double wave_far = 0, wave_all = 0, arm_far = 0, arm_all = 0;
@@ -1320,14 +1338,7 @@ TEST_CASE("drift by region: uniform motion takes the largest, local motion the r
       arm_far += far_growth;
       arm_all += all_growth;
     }
-    const Mesh current = withPositions(mesh, x);
-    for (size_t i = 0; i < points.size(); ++i) {
-      const ClosestPoint c = stream.closestCoherent(points[i], states[i]);
-      const BruteHit truth = bruteForceClosest(current, points[i]);
-      f.check(std::abs(c.distance - truth.distance) <= 1e-12 * truth.distance, [&] {
-        return "step " + std::to_string(step) + ": " + num(c.distance) + ", brute force " + num(truth.distance);
-      });
-    }
+    checkStates(stream, withPositions(mesh, x), points, states, step, f);
   }
   INFO("far region's drift growth " << wave_far << " of " << wave_all << " (wave), " << arm_far << " of " << arm_all
                                      << " (arm)");
@@ -1350,9 +1361,7 @@ TEST_CASE("drift by region: new epochs", "[deform][regions]") {
   CHECK(body.geometry().regions->width[0] <= body.geometry().regions->width[1]);
   QueryStream stream(h);
   stream.setGeometry(&body.geometry());
-  Random random(3);
-  std::vector<Vec3> points;
-  for (int i = 0; i < 100; ++i) points.push_back(randomUnit(random) * random.uniform(0.9, 1.1));
+  const std::vector<Vec3> points = pointsAround(3, 100, 0.9, 1.1);
   std::vector<CoherentState> states(points.size());
   Failures f("closestCoherent across epochs");
   for (int step = 1; step <= 20; ++step) {
@@ -1367,14 +1376,7 @@ TEST_CASE("drift by region: new epochs", "[deform][regions]") {
       REQUIRE(body.setPositions(x).accepted);
     }
     if (step == 8 || step == 14) CHECK(body.geometry().regions->epoch != epoch);
-    const Mesh current = withPositions(mesh, x);
-    for (size_t i = 0; i < points.size(); ++i) {
-      const ClosestPoint c = stream.closestCoherent(points[i], states[i]);
-      const BruteHit truth = bruteForceClosest(current, points[i]);
-      f.check(std::abs(c.distance - truth.distance) <= 1e-12 * truth.distance, [&] {
-        return "step " + std::to_string(step) + ": " + num(c.distance) + ", brute force " + num(truth.distance);
-      });
-    }
+    checkStates(stream, withPositions(mesh, x), points, states, step, f);
   }
   CHECK(f.checks() == 20 * points.size());
   body.setRegionalDrift(false);
