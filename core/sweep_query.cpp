@@ -753,14 +753,15 @@ ClosestPoint QueryStream::closestCoherent(const Vec3& p, CoherentState& state, b
   TriangleIndex face = kInvalidIndex;
   bool certified = false;
   double best2 = kInf;
-  // A set that fails at its first test (the point or the faces near it move by about its
-  // margin each step) costs a gather and saves nothing: the next kClosestWait steps search
-  // from the warm start without one.
-  constexpr uint8_t kClosestWait = 3;
+  // A set that fails within kPayingSteps tests (the point or the faces near it move by about
+  // its margin each step) cost a gather and saved little: the next kClosestWait steps search
+  // from the warm start without one (on bench_service's sheets, a set that certified fewer
+  // than 2 steps cost more than plain searches; 6 steps of waiting measured best).
+  constexpr uint8_t kPayingSteps = 2, kClosestWait = 6;
   const bool tested = same_lineage && state.has_set;
   if (tested) certified = testSet(state, p, movedSinceSet(state, p, g), within, best2, face);
   if (certified && state.set_steps < 255) ++state.set_steps;
-  if (!certified && tested && state.set_steps == 0) state.closest_wait = kClosestWait;
+  if (!certified && tested && state.set_steps < kPayingSteps) state.closest_wait = kClosestWait;
   if (!certified) {
     // Start from the best face of the set just tested (no distance to recompute), else the
     // previous face's distance; or the cap if smaller.

@@ -99,7 +99,7 @@ struct CoherentState {
   bool has_set = false;              // anchor, reach and faces hold a certificate
   uint8_t within_wait = 0;           // withinCoherent: steps to go before gathering a set again
   uint8_t closest_wait = 0;          // closestCoherent: steps to go before gathering a set again
-                                     // (the last one failed at its first test: fast motion)
+                                     // (the last one failed within two tests: fast motion)
   uint8_t set_steps = 0;             // steps the set has certified since it was gathered (either mode)
                                      // (the last one could not hold every face within d)
   Vec3 last_point = Vec3::Zero();
