@@ -755,13 +755,18 @@ ClosestPoint QueryStream::closestCoherent(const Vec3& p, CoherentState& state, b
   double best2 = kInf;
   // A set that fails within kPayingSteps tests (the point or the faces near it move by about
   // its margin each step) cost a gather and saved little: the next kClosestWait steps search
-  // from the warm start without one (on bench_service's sheets, a set that certified fewer
-  // than 2 steps cost more than plain searches; 6 steps of waiting measured best).
-  constexpr uint8_t kPayingSteps = 2, kClosestWait = 6;
+  // from the warm start without one, twice as many each time the next set fails too (up to
+  // kMaxWait), back to kClosestWait once a set pays. On bench_service's sheets a set that
+  // certified fewer than 2 steps cost more than plain searches, and these waits measured best.
+  constexpr uint8_t kPayingSteps = 2, kClosestWait = 6, kMaxWait = 24;
   const bool tested = same_lineage && state.has_set;
   if (tested) certified = testSet(state, p, movedSinceSet(state, p, g), within, best2, face);
   if (certified && state.set_steps < 255) ++state.set_steps;
-  if (!certified && tested && state.set_steps < kPayingSteps) state.closest_wait = kClosestWait;
+  if (certified && state.set_steps >= kPayingSteps) state.closest_backoff = 0;
+  if (!certified && tested && state.set_steps < kPayingSteps) {
+    state.closest_wait = std::max(kClosestWait, state.closest_backoff);
+    state.closest_backoff = static_cast<uint8_t>(std::min<int>(2 * state.closest_wait, kMaxWait));
+  }
   if (!certified) {
     // Start from the best face of the set just tested (no distance to recompute), else the
     // previous face's distance; or the cap if smaller.

@@ -86,9 +86,6 @@ struct CoherentState {
   // once they could come within the set's reach. region_epoch 0: the geometry's drift only.
   uint64_t region_epoch = 0;
   double region_at[2] = {0, 0};
-  float region_best = 0;
-  uint16_t region = 0;
-  bool last_local = false;           // last_drift is the region's first-level drift
   uint64_t lineage = 0;              // geometry lineage of the set and last face (0: cold)
   TriangleIndex last_face = kInvalidIndex;  // closest face of the last query (within its cap)
   uint32_t count = 0;                // candidate faces
@@ -96,12 +93,16 @@ struct CoherentState {
   float reach_steps = 2;             // R = reach_steps * mean_step (see CoherenceOptions); 0: no set
   float lead_steps = 3;              // a set is gathered this many mean steps ahead of the point,
                                      // along mean_velocity (when within 2 R; 0: at the point)
+  float region_best = 0;             // (drift by region, above)
+  uint16_t region = 0;               // (drift by region, above)
+  bool last_local = false;           // last_drift is the region's first-level drift
   bool has_set = false;              // anchor, reach and faces hold a certificate
   uint8_t within_wait = 0;           // withinCoherent: steps to go before gathering a set again
+                                     // (the last one could not hold every face within d)
   uint8_t closest_wait = 0;          // closestCoherent: steps to go before gathering a set again
                                      // (the last one failed within two tests: fast motion)
+  uint8_t closest_backoff = 0;       // the next such wait (doubles while sets keep failing)
   uint8_t set_steps = 0;             // steps the set has certified since it was gathered (either mode)
-                                     // (the last one could not hold every face within d)
   Vec3 last_point = Vec3::Zero();
   Eigen::Vector3f mean_velocity = Eigen::Vector3f::Zero();  // running mean of the point's steps
   TriangleIndex faces[kCoherentSetSize];        // candidates, in blocks of eight
