@@ -705,6 +705,9 @@ double movedSinceSet(const CoherentState& state, const Vec3& p, const TreeGeomet
   const double near = drift[0] - state.region_at[0];
   const double middle = drift[1] - state.region_at[1];
   const double best = static_cast<double>(state.region_best);
+  // A drift that reached infinity (motions past 1e154 a step) makes a difference NaN, which
+  // std::min and std::max would drop: no certificate then.
+  if (!(std::isfinite(near) && std::isfinite(middle) && std::isfinite(lineage))) return kInf;
   const double slack0 = regions->width[0] - best - state.reach;
   const double slack1 = regions->width[1] - best - state.reach;
   return step + std::max({near, std::min(middle, -slack0), std::min(lineage, -slack1)});

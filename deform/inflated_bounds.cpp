@@ -130,7 +130,7 @@ void DeformingBody::setupRegions() {
   }
   region_drift_.assign(2 * static_cast<size_t>(count), 0.0);
   region_motion2_.assign(count, 0.0);
-  vertex_motion2_.assign(mesh.positions.size(), 0.0f);
+  vertex_motion2_.assign(mesh.positions.size(), 0.0);
   regions_.face_region = face_region_.data();
   regions_.count = count;
   regions_.drift = region_drift_.data();
@@ -207,9 +207,9 @@ void DeformingBody::growRegionDrift(bool by_region, double largest) {
     --uniform_skips_;
     return;
   }
-  const float* motion2 = vertex_motion2_.data();
+  const double* motion2 = vertex_motion2_.data();
   for (uint32_t region = 0; region < count; ++region) {
-    float moved2 = 0;
+    double moved2 = 0;
     for (uint32_t i = region_vertex_offsets_[region]; i < region_vertex_offsets_[region + 1]; ++i)
       moved2 = std::max(moved2, motion2[region_vertices_[i]]);
     region_motion2_[region] = moved2;
@@ -382,13 +382,14 @@ DisplacementCheck DeformingBody::setPositions(const std::vector<Vec3>& positions
   // 1e-12 to spare), and how far the farthest vertex moves (the lineage's drift grows by that).
   // NaN fails every comparison, so it is caught by `finite`.
   // The same pass takes the positions' box, for the extent check.
-  // With drift by region it also keeps each vertex's squared motion, rounded up.
+  // With drift by region it also keeps each vertex's squared motion (in double: a float
+  // overflowed past motions of 1.8e19, and an infinite drift made a NaN of the certificate).
   bool finite = true, suspect = false;
   double moved2 = 0;
   Vec3 lower = Vec3::Constant(std::numeric_limits<double>::infinity()), upper = -lower;
   // (Skipped while the motion is uniform: growRegionDrift then grows every region by the largest.)
   const bool by_region = regionalDrift() && uniform_skips_ == 0;
-  float* motion2 = by_region ? vertex_motion2_.data() : nullptr;
+  double* motion2 = by_region ? vertex_motion2_.data() : nullptr;
   for (size_t v = 0; v < positions.size(); ++v) {
     const Vec3 d = positions[v] - anchor_positions_[v];
     const double d2 = d.squaredNorm();
@@ -396,7 +397,7 @@ DisplacementCheck DeformingBody::setPositions(const std::vector<Vec3>& positions
     suspect |= d2 > delta_[v] * delta_[v] * (1 - 1e-12);
     const double step2 = (positions[v] - positions_[v]).squaredNorm();
     moved2 = std::max(moved2, step2);
-    if (motion2) motion2[v] = floatAtLeast(step2);
+    if (motion2) motion2[v] = step2;
     lower = lower.cwiseMin(positions[v]);
     upper = upper.cwiseMax(positions[v]);
   }

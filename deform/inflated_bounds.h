@@ -115,7 +115,7 @@ class DeformingBody {
   std::vector<double> region_drift_;             // [2 * region + level]
   std::vector<double> region_motion2_;           // [region] scratch: squared motion of a change
   std::vector<double> region_box_;               // RegionDrift::box
-  std::vector<float> vertex_motion2_;            // [vertex] squared motion of the last change, rounded up
+  std::vector<double> vertex_motion2_;           // [vertex] squared motion of the last change
   int uniform_skips_ = 0;                        // changes left that skip the per-region pass
   RegionDrift regions_;
   TreeGeometry geometry_;

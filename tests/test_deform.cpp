@@ -1347,6 +1347,37 @@ TEST_CASE("drift by region: uniform motion takes the largest, local motion the r
   CHECK(f.checks() == 30 * points.size());
 }
 
+// Motions past 1.8e19 a step (found by review): the squared motions were kept as floats, which
+// overflowed to infinity; an infinite running drift then made the middle level's difference NaN,
+// which std::min and std::max dropped, and a face in the middle band came closer than a
+// certified answer. Two triangles 1.5e20 apart, the far one first moved by 2e19, then brought
+// toward the point within its bound.
+TEST_CASE("drift by region: huge motions stay exact", "[deform][regions]") {
+  const double x0 = 1.5e20, bound = 1e20, size = 1e18;
+  Mesh mesh;
+  mesh.positions = {Vec3(0, 0, 0), Vec3(size, 0, 0), Vec3(0, size, 0),
+                    Vec3(x0, 0, 0), Vec3(x0 + size, 0, 0), Vec3(x0, size, 0)};
+  mesh.triangles = {{0, 1, 2}, {3, 4, 5}};
+  const auto h = Hierarchy::build(mesh);
+  DeformingBody body(h);
+  body.inflate(std::vector<double>{0, 0, 0, bound, bound, bound});
+  QueryStream stream(h);
+  stream.setGeometry(&body.geometry());
+  CoherentState state;
+  const Vec3 p(2.5e19, 0, 3.1e19);
+  std::vector<Vec3> x = mesh.positions;
+  for (int v = 3; v < 6; ++v) x[v].y() += 2e19;
+  REQUIRE(body.setPositions(x).accepted);
+  stream.closestCoherent(p, state);
+  const Vec3 toward = (p - Vec3(x0, 0, 0)).normalized();
+  for (int v = 3; v < 6; ++v) x[v] = mesh.positions[v] + 0.999 * bound * toward;
+  REQUIRE(body.setPositions(x).accepted);
+  const ClosestPoint c = stream.closestCoherent(p, state);
+  const BruteHit truth = bruteForceClosest(withPositions(mesh, x), p);
+  CHECK(c.triangle == truth.triangle);
+  CHECK(std::abs(c.distance - truth.distance) <= 1e-12 * truth.distance);
+}
+
 // A new epoch (inflate, anchor) restarts the running drifts; states gathered before fall back
 // to the lineage's drift, still exact.
 TEST_CASE("drift by region: new epochs", "[deform][regions]") {
