@@ -17,6 +17,12 @@
 //              centre and moves it by (0.002, 0.001, 0). The positions the service and Embree
 //              get are world positions; the service follows the rigid part
 //              (ServiceOptions::follow_frames).
+//   limb (with --kinds=limb; not in the default run): each body stands still but for its part
+//              within 0.2 of its largest x (armadillo's raised arm, the heads of the bunny and
+//              the elephant), which swings up and down by 0.02 * sin(0.3 step), up to 0.006 a
+//              step (setPositions, displacement bound 0.0201): a character moving one arm under
+//              a cloth. The service keeps its drift by region (ServiceOptions::regional_drift;
+//              --no-regions turns it off).
 // Query: the closest hit within 0.02 of every point (QueryMode::kClosest); with --within=D every
 // triangle within D of every point (QueryMode::kWithin; Embree: rtcPointQuery with radius D,
 // the callback keeping every triangle within D with its closest point's barycentric
@@ -44,9 +50,10 @@
 // the bodies) for 1, 4, 16, 64 bodies and 10k, 100k points.
 //
 // Flags: --quick (10k points, 1 and 4 bodies, 20 steps), --points=a,b  --bodies=a,b
-// --kinds=rigid,deforming,carried  --threads=1,2  --steps=N  --methods=meshsweeper,embree
+// --kinds=rigid,deforming,carried,limb  --threads=1,2  --steps=N  --methods=meshsweeper,embree
 // --reach=R (ServiceOptions::reach_steps)  --lead=L (ServiceOptions::lead_steps)
-// --no-frames (ServiceOptions::follow_frames off)  --within=D  --data-dir=PATH  --broadphase. Exit code 77 when a mesh is missing.
+// --no-frames (ServiceOptions::follow_frames off)  --no-regions (ServiceOptions::regional_drift
+// off)  --within=D  --data-dir=PATH  --broadphase. Exit code 77 when a mesh is missing.
 #include "bench/bench_util.h"
 #include "collision/broadphase.h"
 #include "collision/distance_service.h"
@@ -113,6 +120,7 @@ struct Options {
   std::string data_dir;
   bool broadphase = false;
   bool follow_frames = true;  // ServiceOptions::follow_frames (--no-frames: off)
+  bool regional_drift = true;  // ServiceOptions::regional_drift (--no-regions: off)
   double within = 0;  // > 0: QueryMode::kWithin with this distance (--within=D)
 };
 
@@ -151,7 +159,7 @@ Options parseOptions(int argc, char** argv) {
     } else if (flag == "--kinds") {
       o.kinds = splitList(value);
       for (const std::string& k : o.kinds)
-        if (k != "rigid" && k != "deforming" && k != "carried") usageError("unknown kind '" + k + "'");
+        if (k != "rigid" && k != "deforming" && k != "carried" && k != "limb") usageError("unknown kind '" + k + "'");
     } else if (flag == "--methods") {
       o.methods = splitList(value);
       for (const std::string& m : o.methods)
@@ -164,6 +172,8 @@ Options parseOptions(int argc, char** argv) {
       o.data_dir = value;
     } else if (flag == "--no-frames") {
       o.follow_frames = false;
+    } else if (flag == "--no-regions") {
+      o.regional_drift = false;
     } else if (flag == "--broadphase") {
       o.broadphase = true;
     } else if (flag == "--within") {
@@ -477,6 +487,7 @@ struct Scene {
   std::vector<Vec3> origins;            // [body]
   std::vector<Vec3> rest_points;        // draped sheet
   bool deforming = false;
+  bool limb = false;                    // deforming: one limb waves, the rest stays (limbPositions())
   bool carried = false;                 // deforming, and the whole scene carried (carry())
   Vec3 center = Vec3::Zero();           // the bodies' grid centre
 
@@ -494,6 +505,7 @@ Scene makeScene(const std::vector<Mesh>& meshes, size_t bodies, size_t points, c
   Scene s;
   s.deforming = kind != "rigid";
   s.carried = kind == "carried";
+  s.limb = kind == "limb";
   const int side = static_cast<int>(std::ceil(std::sqrt(static_cast<double>(bodies))));
   for (size_t b = 0; b < bodies; ++b) {
     s.mesh_index.push_back(static_cast<int>(b % meshes.size()));
@@ -552,8 +564,24 @@ void sheetAt(const Scene& s, int step, PointMatrix& out) {
   }
 }
 
-// A deforming body's positions at `step`: the wave, carried in a carried scene.
+// A limb scene's positions: the vertices within 0.2 of the body's largest x (armadillo's
+// raised arm, the bunny's and the elephant's heads) swing up and down together, 0.02 * sin(0.3
+// step) (up to 0.006 a step), blended over the first 0.1; the rest of the body stays at rest.
+void limbPositions(const Mesh& local, const Vec3& origin, int step, std::vector<Vec3>& out) {
+  out.resize(local.positions.size());
+  double x_max = -std::numeric_limits<double>::infinity();
+  for (const Vec3& x : local.positions) x_max = std::max(x_max, x.x());
+  for (size_t v = 0; v < out.size(); ++v) {
+    const Vec3& x = local.positions[v];
+    const double weight = std::clamp((x.x() - (x_max - 0.2)) / 0.1, 0.0, 1.0);
+    out[v] = origin + x + Vec3(0, 0, weight * 0.02 * std::sin(0.3 * step));
+  }
+}
+
+// A deforming body's positions at `step`: the wave (the limb's swing in a limb scene), carried
+// in a carried scene.
 void bodyPositions(const Scene& s, size_t b, int step, std::vector<Vec3>& out) {
+  if (s.limb) return limbPositions(*s.meshes[b], s.origins[b], step, out);
   wavePositions(*s.meshes[b], s.origins[b], step, out);
   if (!s.carried) return;
   const Eigen::Isometry3d carry = s.carry(step);
@@ -586,8 +614,9 @@ struct RunResult {
 // Meshsweeper: the service.
 RunResult runMeshsweeper(const Scene& scene, const std::vector<std::shared_ptr<const Hierarchy>>& hierarchies,
                          int steps, unsigned threads, float reach_steps, float lead_steps, bool follow_frames,
+                         bool regional_drift,
                          const Query& query) {
-  DistanceService service(ServiceOptions{threads, kBlock, reach_steps, lead_steps, follow_frames});
+  DistanceService service(ServiceOptions{threads, kBlock, reach_steps, lead_steps, follow_frames, regional_drift});
   std::vector<BodyHandle> handles;
   std::vector<std::vector<Vec3>> positions(scene.meshes.size());
   for (size_t b = 0; b < scene.meshes.size(); ++b) {
@@ -596,8 +625,9 @@ RunResult runMeshsweeper(const Scene& scene, const std::vector<std::shared_ptr<c
       bodyPositions(scene, b, 0, positions[b]);
       std::vector<Vec3> rest(scene.meshes[b]->positions.size());
       for (size_t v = 0; v < rest.size(); ++v) rest[v] = scene.meshes[b]->positions[v] + scene.origins[b];
-      // The wave moves a vertex by at most 0.003 * |(0.6, 0.3, 1)| < 0.0037 from rest.
-      handles.push_back(service.addDeforming(h, 0.0037, rest));
+      // The wave moves a vertex by at most 0.003 * |(0.6, 0.3, 1)| < 0.0037 from rest; the
+      // limb by at most 0.02.
+      handles.push_back(service.addDeforming(h, scene.limb ? 0.0201 : 0.0037, rest));
     } else {
       handles.push_back(service.addRigid(h, rigidPose(scene.origins[b], 0)));
     }
@@ -952,7 +982,7 @@ int main(int argc, char** argv) {
         for (const std::string& method : options.methods) {
           for (unsigned threads : options.threads) {
             const RunResult r = method == "meshsweeper" ? runMeshsweeper(scene, hierarchies, options.steps, threads, options.reach_steps, options.lead_steps,
-                                                                         options.follow_frames, query)
+                                                                         options.follow_frames, options.regional_drift, query)
                                                         : runEmbree(scene, meshes, options.steps, threads, query);
             std::printf("| %s | %zu | %zu | %s | %u | %.2f | %.2f | %.2f | %.2f | %.2f | %.1f%% | %s |\n",
                         kind.c_str(), bodies, points, method.c_str(), threads, 1e3 * median(r.wall),
