@@ -93,7 +93,10 @@ void DeformingBody::setupRegions() {
   }
   std::vector<uint64_t> cell(faces, 0), used;
   if (diagonal > 0 && std::isfinite(diagonal)) {
-    for (double side = diagonal / 16;; side *= 1.25) {
+    // Each try widens the cells by at least 1.25, by the root of the excess when larger (the
+    // cells a surface occupies fall as the square of their size): a few tries, even for a
+    // mesh of millions of faces.
+    for (double side = diagonal / 16;; side *= std::max(1.25, std::sqrt(static_cast<double>(used.size()) / kMaxRegions))) {
       for (size_t f = 0; f < faces; ++f) {
         uint64_t key = 0;
         for (int axis = 0; axis < 3; ++axis) {
