@@ -577,6 +577,16 @@ ClosestPoint QueryStream::closestCoherent(const Vec3& p) {
   return out;
 }
 
+namespace {
+
+// The geometry's drift by region when the state's set has a region of its current epoch, else
+// null (no regions, none attached, or an earlier epoch).
+const RegionDrift* regionOf(const CoherentState& state, const TreeGeometry& g) {
+  return g.regions && state.region_epoch != 0 && state.region_epoch == g.regions->epoch ? g.regions : nullptr;
+}
+
+}  // namespace
+
 // The set of a compact state from gathered_ (sorted by distance from anchor), with its reach,
 // at the geometry's current drift.
 void QueryStream::storeSet(const Vec3& anchor, double set_reach, CoherentState& state) const {
@@ -593,7 +603,7 @@ void QueryStream::storeSet(const Vec3& anchor, double set_reach, CoherentState& 
   // anchor; an empty set (no face within its reach) keeps its last region of this epoch, else
   // takes the region whose box is nearest (a scan), at its box's distance.
   const RegionDrift* regions = g.regions;
-  const bool had_region = regions && state.region_epoch != 0 && state.region_epoch == regions->epoch;
+  const bool had_region = regionOf(state, g) != nullptr;
   state.region_epoch = 0;
   if (regions && regions->epoch != 0 && state.has_set && set_reach < kInf) {
     uint32_t region = 0;
@@ -661,8 +671,9 @@ void restartState(CoherentState& state) {
 // The drift the state's motion follows: its region's first-level drift while its set has one
 // in the geometry's epoch (`local`), else the lineage's.
 double followedDrift(const CoherentState& state, const TreeGeometry& g, bool& local) {
-  local = g.regions && state.region_epoch != 0 && state.region_epoch == g.regions->epoch;
-  return local ? g.regions->drift[2 * state.region] : g.drift;
+  const RegionDrift* regions = regionOf(state, g);
+  local = regions != nullptr;
+  return local ? regions->drift[2 * state.region] : g.drift;
 }
 
 // The running means of the point's motion relative to the geometry (its step plus the growth
@@ -699,8 +710,8 @@ void trackMotion(CoherentState& state, const Vec3& p, const TreeGeometry& g) {
 double movedSinceSet(const CoherentState& state, const Vec3& p, const TreeGeometry& g) {
   const double step = (p - state.anchor).norm();
   const double lineage = g.drift - state.drift_at;
-  const RegionDrift* regions = g.regions;
-  if (!regions || state.region_epoch == 0 || state.region_epoch != regions->epoch) return step + lineage;
+  const RegionDrift* regions = regionOf(state, g);
+  if (!regions) return step + lineage;
   const double* drift = regions->drift + 2 * state.region;
   const double near = drift[0] - state.region_at[0];
   const double middle = drift[1] - state.region_at[1];

@@ -61,18 +61,7 @@ void DeformingBody::setRegionalDrift(bool on) {
     return;
   }
   geometry_.regions = nullptr;
-  regions_ = RegionDrift{};
-  face_region_ = {};
-  region_vertex_offsets_ = {};
-  region_vertices_ = {};
-  for (int level = 0; level < 2; ++level) {
-    neighbour_offsets_[level] = {};
-    neighbours_[level] = {};
-  }
-  region_drift_ = {};
-  region_motion2_ = {};
-  region_box_ = {};
-  vertex_motion2_ = {};
+  regions_ = RegionTables{};
 }
 
 // The regions: the cells of a grid over the mesh's own positions that hold a face's centroid
@@ -114,30 +103,30 @@ void DeformingBody::setupRegions() {
     used.assign(1, 0);  // no extent: one region
   }
   const uint32_t count = static_cast<uint32_t>(used.size());
-  face_region_.resize(faces);
+  regions_.face_region.resize(faces);
   std::vector<std::vector<VertexIndex>> vertices(count);
   for (size_t f = 0; f < faces; ++f) {
     const uint16_t region = static_cast<uint16_t>(std::lower_bound(used.begin(), used.end(), cell[f]) - used.begin());
-    face_region_[f] = region;
+    regions_.face_region[f] = region;
     const Triangle& t = mesh.triangles[f];
     vertices[region].insert(vertices[region].end(), t.begin(), t.end());
   }
-  region_vertex_offsets_.assign(static_cast<size_t>(count) + 1, 0);
-  region_vertices_.clear();
+  regions_.vertex_offsets.assign(static_cast<size_t>(count) + 1, 0);
+  regions_.vertices.clear();
   for (uint32_t region = 0; region < count; ++region) {
     std::vector<VertexIndex>& list = vertices[region];
     std::sort(list.begin(), list.end());
     list.erase(std::unique(list.begin(), list.end()), list.end());
-    region_vertices_.insert(region_vertices_.end(), list.begin(), list.end());
-    region_vertex_offsets_[region + 1] = static_cast<uint32_t>(region_vertices_.size());
+    regions_.vertices.insert(regions_.vertices.end(), list.begin(), list.end());
+    regions_.vertex_offsets[region + 1] = static_cast<uint32_t>(regions_.vertices.size());
   }
-  region_drift_.assign(2 * static_cast<size_t>(count), 0.0);
-  region_motion2_.assign(count, 0.0);
-  vertex_motion2_.assign(mesh.positions.size(), 0.0);
-  regions_.face_region = face_region_.data();
-  regions_.count = count;
-  regions_.drift = region_drift_.data();
-  geometry_.regions = &regions_;
+  regions_.drift.assign(2 * static_cast<size_t>(count), 0.0);
+  regions_.motion2.assign(count, 0.0);
+  regions_.vertex_motion2.assign(mesh.positions.size(), 0.0);
+  regions_.view.face_region = regions_.face_region.data();
+  regions_.view.count = count;
+  regions_.view.drift = regions_.drift.data();
+  geometry_.regions = &regions_.view;
 }
 
 // A new epoch of drift by region, for the current anchor positions and displacement bounds:
@@ -148,14 +137,14 @@ void DeformingBody::setupRegions() {
 // at zero under a new epoch value: states gathered before stop reading them.
 void DeformingBody::newRegionEpoch() {
   if (!regionalDrift()) return;
-  const uint32_t count = regions_.count;
+  const uint32_t count = regions_.view.count;
   constexpr double kInf = std::numeric_limits<double>::infinity();
   std::vector<Vec3> lower(count, Vec3::Constant(kInf)), upper(count, Vec3::Constant(-kInf));
   Vec3 all_lower = Vec3::Constant(kInf), all_upper = Vec3::Constant(-kInf);
   for (uint32_t region = 0; region < count; ++region) {
     double grow = 0;
-    for (uint32_t i = region_vertex_offsets_[region]; i < region_vertex_offsets_[region + 1]; ++i) {
-      const VertexIndex v = region_vertices_[i];
+    for (uint32_t i = regions_.vertex_offsets[region]; i < regions_.vertex_offsets[region + 1]; ++i) {
+      const VertexIndex v = regions_.vertices[i];
       lower[region] = lower[region].cwiseMin(anchor_positions_[v]);
       upper[region] = upper[region].cwiseMax(anchor_positions_[v]);
       grow = std::max(grow, delta_[v]);
@@ -167,20 +156,20 @@ void DeformingBody::newRegionEpoch() {
     all_lower = all_lower.cwiseMin(lower[region]);
     all_upper = all_upper.cwiseMax(upper[region]);
   }
-  region_box_.resize(6 * static_cast<size_t>(count));
+  regions_.box.resize(6 * static_cast<size_t>(count));
   for (uint32_t region = 0; region < count; ++region)
     for (int axis = 0; axis < 3; ++axis) {
-      region_box_[axis * count + region] = lower[region][axis];
-      region_box_[(3 + axis) * count + region] = upper[region][axis];
+      regions_.box[axis * count + region] = lower[region][axis];
+      regions_.box[(3 + axis) * count + region] = upper[region][axis];
     }
-  regions_.box = region_box_.data();
+  regions_.view.box = regions_.box.data();
   const double diagonal = (all_upper - all_lower).norm();
-  regions_.width[0] = diagonal / 16;
-  regions_.width[1] = diagonal / 4;
+  regions_.view.width[0] = diagonal / 16;
+  regions_.view.width[1] = diagonal / 4;
   for (int level = 0; level < 2; ++level) {
-    const double reach = regions_.width[level] * (1 + 1e-9);
-    std::vector<uint32_t>& offsets = neighbour_offsets_[level];
-    std::vector<uint16_t>& list = neighbours_[level];
+    const double reach = regions_.view.width[level] * (1 + 1e-9);
+    std::vector<uint32_t>& offsets = regions_.neighbour_offsets[level];
+    std::vector<uint16_t>& list = regions_.neighbours[level];
     offsets.assign(static_cast<size_t>(count) + 1, 0);
     list.clear();
     for (uint32_t region = 0; region < count; ++region) {
@@ -191,53 +180,53 @@ void DeformingBody::newRegionEpoch() {
       offsets[region + 1] = static_cast<uint32_t>(list.size());
     }
   }
-  std::fill(region_drift_.begin(), region_drift_.end(), 0.0);
-  uniform_skips_ = 0;
-  regions_.epoch = nextGeometryVersion();
+  std::fill(regions_.drift.begin(), regions_.drift.end(), 0.0);
+  regions_.uniform_skips = 0;
+  regions_.view.epoch = nextGeometryVersion();
 }
 
 // Each region's running drifts grow by how far the farthest vertex of its neighbourhoods moved
-// in this change (`by_region`: from vertex_motion2_, which setPositions filled), or by the
+// in this change (`by_region`: from the vertex motions setPositions kept), or by the
 // largest motion of all (`largest`, an upper bound of every region's). A change where nine
 // regions in ten saw their first neighbourhood move by half the largest or more (a wave over
 // the whole body) gains nothing from regions: the next kUniformSkips changes skip the
 // per-region pass and take the largest, then a change measures again.
 void DeformingBody::growRegionDrift(bool by_region, double largest) {
   if (!regionalDrift()) return;
-  const uint32_t count = regions_.count;
+  const uint32_t count = regions_.view.count;
   if (!by_region) {
-    for (double& drift : region_drift_) drift = grownDrift(drift, largest);
-    --uniform_skips_;
+    for (double& drift : regions_.drift) drift = grownDrift(drift, largest);
+    --regions_.uniform_skips;
     return;
   }
-  const double* motion2 = vertex_motion2_.data();
+  const double* motion2 = regions_.vertex_motion2.data();
   for (uint32_t region = 0; region < count; ++region) {
     double moved2 = 0;
-    for (uint32_t i = region_vertex_offsets_[region]; i < region_vertex_offsets_[region + 1]; ++i)
-      moved2 = std::max(moved2, motion2[region_vertices_[i]]);
-    region_motion2_[region] = moved2;
+    for (uint32_t i = regions_.vertex_offsets[region]; i < regions_.vertex_offsets[region + 1]; ++i)
+      moved2 = std::max(moved2, motion2[regions_.vertices[i]]);
+    regions_.motion2[region] = moved2;
   }
   // A neighbourhood of most regions takes the largest motion of all (an upper bound of its
   // own); a scan stops once it meets it.
-  const double largest2 = *std::max_element(region_motion2_.begin(), region_motion2_.end());
+  const double largest2 = *std::max_element(regions_.motion2.begin(), regions_.motion2.end());
   uint32_t uniform = 0;  // regions whose first neighbourhood moved by half the largest or more
   for (int level = 0; level < 2; ++level) {
-    const std::vector<uint32_t>& offsets = neighbour_offsets_[level];
-    const std::vector<uint16_t>& list = neighbours_[level];
+    const std::vector<uint32_t>& offsets = regions_.neighbour_offsets[level];
+    const std::vector<uint16_t>& list = regions_.neighbours[level];
     for (uint32_t region = 0; region < count; ++region) {
       double moved2 = largest2;
       if (2 * (offsets[region + 1] - offsets[region]) <= count) {
         moved2 = 0;
         for (uint32_t i = offsets[region]; i < offsets[region + 1] && moved2 < largest2; ++i)
-          moved2 = std::max(moved2, region_motion2_[list[i]]);
+          moved2 = std::max(moved2, regions_.motion2[list[i]]);
       }
       if (level == 0) uniform += moved2 >= 0.25 * largest2;
-      double& drift = region_drift_[2 * static_cast<size_t>(region) + level];
+      double& drift = regions_.drift[2 * static_cast<size_t>(region) + level];
       drift = grownDrift(drift, std::sqrt(moved2));
     }
   }
   constexpr int kUniformSkips = 7;
-  if (10 * uniform >= 9 * count) uniform_skips_ = kUniformSkips;
+  if (10 * uniform >= 9 * count) regions_.uniform_skips = kUniformSkips;
 }
 
 void DeformingBody::setInlineFaces(bool on) {
@@ -391,8 +380,8 @@ DisplacementCheck DeformingBody::setPositions(const std::vector<Vec3>& positions
   double moved2 = 0;
   Vec3 lower = Vec3::Constant(std::numeric_limits<double>::infinity()), upper = -lower;
   // (Skipped while the motion is uniform: growRegionDrift then grows every region by the largest.)
-  const bool by_region = regionalDrift() && uniform_skips_ == 0;
-  double* motion2 = by_region ? vertex_motion2_.data() : nullptr;
+  const bool by_region = regionalDrift() && regions_.uniform_skips == 0;
+  double* motion2 = by_region ? regions_.vertex_motion2.data() : nullptr;
   for (size_t v = 0; v < positions.size(); ++v) {
     const Vec3 d = positions[v] - anchor_positions_[v];
     const double d2 = d.squaredNorm();

@@ -109,17 +109,21 @@ class DeformingBody {
   void setupRegions();
   void newRegionEpoch();
   void growRegionDrift(bool by_region, double largest);
-  std::vector<uint16_t> face_region_;            // [face]
-  std::vector<uint32_t> region_vertex_offsets_;  // CSR: region r's distinct vertices
-  std::vector<VertexIndex> region_vertices_;
-  std::vector<uint32_t> neighbour_offsets_[2];   // CSR per level: the regions within width[k]
-  std::vector<uint16_t> neighbours_[2];
-  std::vector<double> region_drift_;             // [2 * region + level]
-  std::vector<double> region_motion2_;           // [region] scratch: squared motion of a change
-  std::vector<double> region_box_;               // RegionDrift::box
-  std::vector<double> vertex_motion2_;           // [vertex] squared motion of the last change
-  int uniform_skips_ = 0;                        // changes left that skip the per-region pass
-  RegionDrift regions_;
+  // Drift by region's tables; empty while it is off (setRegionalDrift(false) resets them).
+  struct RegionTables {
+    std::vector<uint16_t> face_region;            // [face]
+    std::vector<uint32_t> vertex_offsets;         // CSR: region r's distinct vertices
+    std::vector<VertexIndex> vertices;
+    std::vector<uint32_t> neighbour_offsets[2];   // CSR per level: the regions within width[k]
+    std::vector<uint16_t> neighbours[2];
+    std::vector<double> drift;                    // [2 * region + level]
+    std::vector<double> motion2;                  // [region] scratch: squared motion of a change
+    std::vector<double> box;                      // RegionDrift::box
+    std::vector<double> vertex_motion2;           // [vertex] squared motion of the last change
+    int uniform_skips = 0;                        // changes left that skip the per-region pass
+    RegionDrift view;                             // what geometry_.regions points to
+  };
+  RegionTables regions_;
   TreeGeometry geometry_;
 };
 
