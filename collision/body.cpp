@@ -2,6 +2,8 @@
 // (Baerentzen & Aanaes 2005; see body.h).
 #include "collision/body.h"
 
+#include "collision/self_intersection.h"
+
 #include <algorithm>
 #include <cmath>
 #include <limits>
@@ -179,11 +181,21 @@ std::shared_ptr<const BodyShape> BodyShape::build(std::shared_ptr<const Hierarch
   // Orientation: a closed surface whose faces point inward encloses a negative volume (summed
   // over the faces, about the box's centre). It is the same solid: its normals are flipped, so
   // that signs still say inside and outside. One enclosing no volume has no inside.
+  // A surface that intersects itself encloses no one solid: the sides of its faces, and so its
+  // pseudonormals, do not tell inside from outside (a point inside one part can lie outside
+  // the faces of another, nearer part). It is treated as open too: unsigned answers, never a
+  // wrong sign.
   if (reason.empty()) {
     const double volume6 = enclosedVolume6(mesh, pos.data(), 0.5 * (shape->rest_lower_ + shape->rest_upper_));
-    if (!(volume6 != 0)) reason = "the surface encloses no volume";
-    shape->orientation_ = volume6 < 0 ? -1.0 : 1.0;
-    for (Vec3& n : shape->face_normals_) n *= shape->orientation_;
+    if (!(volume6 != 0)) {
+      reason = "the surface encloses no volume";
+    } else if (const auto pair = firstSelfIntersection(mesh)) {
+      reason = "faces " + std::to_string(pair->first) + " and " + std::to_string(pair->second) +
+               " intersect (a self-intersecting surface)";
+    } else {
+      shape->orientation_ = volume6 < 0 ? -1.0 : 1.0;
+      for (Vec3& n : shape->face_normals_) n *= shape->orientation_;
+    }
   }
   shape->closed_ = reason.empty();
   shape->open_reason_ = reason;
