@@ -50,6 +50,91 @@ double enclosedVolume6(const Mesh& mesh, const Vec3* positions, const Vec3& o) {
   return volume6;
 }
 
+// Why the components of a closed, embedded surface (no face crossing another) do not bound one
+// solid, "" when they do. Faces point outward as given when `orientation` is +1 (inward: -1).
+// Every point off the surface must then have winding number 0 (outside) or 1 (inside), so a
+// component facing out must lie outside every other (winding number 0 of the others at one of
+// its vertices) and one facing in, a cavity, inside them (1). A ball inside a ball, both facing
+// out, fails: between them the inner ball's faces say outside. The winding number counts only
+// the components whose box holds the vertex (van Oosterom & Strackee solid angles).
+std::string nestingProblem(const Mesh& mesh, const std::vector<TriangleIndex>& edge_neighbor, double orientation) {
+  const size_t face_count = mesh.triangles.size();
+  // Components: faces joined across edges (every edge of a closed surface has its neighbour).
+  constexpr uint32_t kNone = 0xffffffffu;
+  std::vector<uint32_t> component(face_count, kNone);
+  std::vector<TriangleIndex> first_face, stack;
+  for (size_t seed = 0; seed < face_count; ++seed) {
+    if (component[seed] != kNone) continue;
+    const uint32_t c = static_cast<uint32_t>(first_face.size());
+    first_face.push_back(static_cast<TriangleIndex>(seed));
+    component[seed] = c;
+    stack.assign(1, static_cast<TriangleIndex>(seed));
+    while (!stack.empty()) {
+      const TriangleIndex f = stack.back();
+      stack.pop_back();
+      for (int k = 0; k < 3; ++k) {
+        const TriangleIndex g = edge_neighbor[3 * static_cast<size_t>(f) + k];
+        if (g != kInvalidIndex && component[g] == kNone) {
+          component[g] = c;
+          stack.push_back(g);
+        }
+      }
+    }
+  }
+  const size_t count = first_face.size();
+  if (count == 1) return "";
+  // Pairs of boxes are compared: a bound on the work for meshes of very many components.
+  constexpr size_t kMaxComponents = 20000;
+  if (count > kMaxComponents)
+    return std::to_string(count) + " components (more than " + std::to_string(kMaxComponents) +
+           ": how they nest is not checked)";
+  const auto& x = mesh.positions;
+  std::vector<double> volume6(count, 0.0);
+  std::vector<Vec3> lower(count, Vec3::Constant(std::numeric_limits<double>::infinity()));
+  std::vector<Vec3> upper(count, Vec3::Constant(-std::numeric_limits<double>::infinity()));
+  std::vector<uint32_t> begin(count + 1, 0);
+  for (size_t f = 0; f < face_count; ++f) {
+    const Triangle& t = mesh.triangles[f];
+    const uint32_t c = component[f];
+    ++begin[c + 1];
+    volume6[c] += x[t[0]].dot(x[t[1]].cross(x[t[2]]));
+    for (VertexIndex v : t) {
+      lower[c] = lower[c].cwiseMin(x[v]);
+      upper[c] = upper[c].cwiseMax(x[v]);
+    }
+  }
+  for (size_t c = 0; c < count; ++c) begin[c + 1] += begin[c];
+  std::vector<TriangleIndex> faces(face_count);
+  {
+    std::vector<uint32_t> fill(begin.begin(), begin.end() - 1);
+    for (size_t f = 0; f < face_count; ++f) faces[fill[component[f]]++] = static_cast<TriangleIndex>(f);
+  }
+  constexpr double kPi = 3.14159265358979323846;
+  for (size_t c = 0; c < count; ++c) {
+    const double own = volume6[c] * orientation;
+    if (!(own != 0))
+      return "the component of face " + std::to_string(first_face[c]) + " encloses no volume";
+    const Vec3& p = x[mesh.triangles[first_face[c]][0]];
+    double winding = 0;
+    for (size_t d = 0; d < count; ++d) {
+      if (d == c || (p.array() < lower[d].array()).any() || (p.array() > upper[d].array()).any()) continue;
+      for (uint32_t i = begin[d]; i < begin[d + 1]; ++i) {
+        const Triangle& t = mesh.triangles[faces[i]];
+        const Vec3 a = x[t[0]] - p, b = x[t[1]] - p, e = x[t[2]] - p;
+        const double la = a.norm(), lb = b.norm(), le = e.norm();
+        winding += 2 * std::atan2(a.dot(b.cross(e)), la * lb * le + a.dot(b) * le + b.dot(e) * la + e.dot(a) * lb);
+      }
+    }
+    winding *= orientation / (4 * kPi);
+    const double expected = own > 0 ? 0.0 : 1.0;
+    if (!(std::abs(winding - expected) < 0.5))
+      return "the component of face " + std::to_string(first_face[c]) + " lies " +
+             (own > 0 ? "inside another component, both facing out" : "outside the others, facing in") +
+             " (winding number " + std::to_string(static_cast<long>(std::lround(winding))) + " of the others there)";
+  }
+  return "";
+}
+
 }  // namespace
 
 Vec3 unitFaceNormal(const Vec3& a, const Vec3& b, const Vec3& c) {
@@ -183,8 +268,8 @@ std::shared_ptr<const BodyShape> BodyShape::build(std::shared_ptr<const Hierarch
   // that signs still say inside and outside. One enclosing no volume has no inside.
   // A surface that intersects itself encloses no one solid: the sides of its faces, and so its
   // pseudonormals, do not tell inside from outside (a point inside one part can lie outside
-  // the faces of another, nearer part). It is treated as open too: unsigned answers, never a
-  // wrong sign.
+  // the faces of another, nearer part). So do components nested the wrong way (nestingProblem).
+  // Both are treated as open too: unsigned answers, never a wrong sign.
   if (reason.empty()) {
     const double volume6 = enclosedVolume6(mesh, pos.data(), 0.5 * (shape->rest_lower_ + shape->rest_upper_));
     if (!(volume6 != 0)) {
@@ -192,6 +277,9 @@ std::shared_ptr<const BodyShape> BodyShape::build(std::shared_ptr<const Hierarch
     } else if (const auto pair = firstSelfIntersection(mesh)) {
       reason = "faces " + std::to_string(pair->first) + " and " + std::to_string(pair->second) +
                " intersect (a self-intersecting surface)";
+    } else if (std::string nested = nestingProblem(mesh, shape->edge_neighbor_, volume6 < 0 ? -1.0 : 1.0);
+               !nested.empty()) {
+      reason = nested;
     } else {
       shape->orientation_ = volume6 < 0 ? -1.0 : 1.0;
       for (Vec3& n : shape->face_normals_) n *= shape->orientation_;

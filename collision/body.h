@@ -7,12 +7,12 @@
 //    and whether the mesh is closed (every edge has exactly two faces, used in opposite
 //    directions; every vertex's faces form one fan; no face repeats a vertex or is degenerate
 //    (isDegenerateTriangle) at the rest positions; the surface encloses a volume; no two
-//    faces intersect beyond what they share, at the rest positions: firstSelfIntersection()).
+//    faces intersect beyond what they share, at the rest positions: firstSelfIntersection();
+//    its components nest as one solid's: one facing out outside the others, a cavity inside).
 //    Only closed bodies get a sign (inside/outside). A closed surface whose faces point inward
 //    (a negative enclosed volume) is the same solid: its pseudonormals are flipped (inward()).
-//    Signs also assume what is not checked: no nested components of the same orientation, and
-//    a deformation that keeps the surface embedded and its faces from degenerating (the
-//    pseudonormal test's precondition).
+//    Signs also assume what is not checked: a deformation that keeps the surface embedded and
+//    its faces from degenerating (the pseudonormal test's precondition).
 //  - Angle-weighted pseudonormals at the rest positions (Baerentzen & Aanaes, "Signed distance
 //    computation using the angle weighted pseudonormal", IEEE TVCG 2005): the face normal; for
 //    an edge the sum of its two unit face normals; for a vertex the sum of the unit normals of

@@ -642,6 +642,62 @@ TEST_CASE("a closed surface that intersects itself answers unsigned", "[service]
   if (const Mesh* armadillo = realMesh("armadillo")) CHECK(service.shapeFor(service.hierarchyFor(*armadillo))->closed());
 }
 
+TEST_CASE("closed components nested the wrong way answer unsigned", "[service][sign]") {
+  // A ball inside a ball, both facing out (the eyes inside a head, say): between them the inner
+  // ball is nearest and its faces say outside, where the winding number (1) says inside.
+  auto ballsInBall = [](bool inner_faces_in) {
+    Mesh mesh = scenes::icosphere(3, 1.0);
+    const Mesh inner = scenes::icosphere(3, 0.5);
+    const VertexIndex base = static_cast<VertexIndex>(mesh.positions.size());
+    mesh.positions.insert(mesh.positions.end(), inner.positions.begin(), inner.positions.end());
+    for (const Triangle& t : inner.triangles)
+      mesh.triangles.push_back(inner_faces_in ? Triangle{base + t[0], base + t[2], base + t[1]}
+                                              : Triangle{base + t[0], base + t[1], base + t[2]});
+    return mesh;
+  };
+  const Mesh nested = ballsInBall(false);
+  const Vec3 p(0.55, 0.01, 0.02);  // between the balls, nearest the inner one
+  REQUIRE(windingNumber(nested, p) == Approx(1.0).margin(1e-9));
+  DistanceService service;
+  const auto shape = service.shapeFor(service.hierarchyFor(nested));
+  CHECK_FALSE(shape->closed());
+  CHECK_THAT(shape->openReason(), Catch::Contains("inside another component"));
+  service.addRigid(service.hierarchyFor(nested));
+  const StepResult r = service.step(toMatrix({p}), kInf, QueryMode::kClosest);
+  REQUIRE(r.closest(0));
+  CHECK(r.closest(0)->triangle >= scenes::icosphere(3, 1.0).triangles.size());  // the inner ball
+  CHECK(r.closest(0)->sign == HitSign::kUnsigned);
+  // The same with the inner ball facing in (a cavity) is one solid, and signed; so is the
+  // whole of it turned inside out (a cavity's faces then face out, the outer ball's in).
+  CHECK(service.shapeFor(service.hierarchyFor(ballsInBall(true)))->closed());
+  Mesh turned = ballsInBall(true);
+  for (Triangle& t : turned.triangles) std::swap(t[1], t[2]);
+  const auto turned_shape = service.shapeFor(service.hierarchyFor(turned));
+  CHECK(turned_shape->closed());
+  CHECK(turned_shape->inward());
+  // Side by side, each facing out: one solid of two parts.
+  Mesh pair = scenes::icosphere(2, 1.0);
+  {
+    const Mesh other = scenes::icosphere(2, 1.0);
+    const VertexIndex base = static_cast<VertexIndex>(pair.positions.size());
+    for (const Vec3& x : other.positions) pair.positions.push_back(x + Vec3(3, 0, 0));
+    for (const Triangle& t : other.triangles) pair.triangles.push_back({base + t[0], base + t[1], base + t[2]});
+  }
+  CHECK(service.shapeFor(service.hierarchyFor(pair))->closed());
+  // More components than the nesting check compares (20,001 tetrahedra): unsigned, said so.
+  Mesh many;
+  for (int i = 0; i < 20001; ++i) {
+    const VertexIndex base = static_cast<VertexIndex>(many.positions.size());
+    const Vec3 o(3.0 * (i % 200), 3.0 * (i / 200), 0);
+    for (const Vec3& x : {Vec3(0, 0, 0), Vec3(1, 0, 0), Vec3(0, 1, 0), Vec3(0, 0, 1)}) many.positions.push_back(o + x);
+    for (const Triangle& t : std::vector<Triangle>{{0, 2, 1}, {0, 1, 3}, {0, 3, 2}, {1, 2, 3}})
+      many.triangles.push_back({base + t[0], base + t[1], base + t[2]});
+  }
+  const auto many_shape = service.shapeFor(service.hierarchyFor(many));
+  CHECK_FALSE(many_shape->closed());
+  CHECK_THAT(many_shape->openReason(), Catch::Contains("20001 components"));
+}
+
 TEST_CASE("open meshes answer unsigned; distance 0 uses the feature's pseudonormal", "[service][sign]") {
   DistanceService service;
   const Mesh plane = scenes::gridPlane(4, 2.0);
