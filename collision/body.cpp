@@ -50,6 +50,20 @@ double enclosedVolume6(const Mesh& mesh, const Vec3* positions, const Vec3& o) {
   return volume6;
 }
 
+// Why the surface is not embedded (two of its faces intersect), "" when it is. A mesh the test
+// cannot take (CGAL's Surface_mesh refused a face: never seen for a closed, manifold one) is
+// not trusted either.
+std::string crossingFaces(const Mesh& mesh) {
+  try {
+    if (const auto pair = firstSelfIntersection(mesh))
+      return "faces " + std::to_string(pair->first) + " and " + std::to_string(pair->second) +
+             " intersect (a self-intersecting surface)";
+  } catch (const std::runtime_error& e) {
+    return std::string("not checked for self-intersections: ") + e.what();
+  }
+  return "";
+}
+
 // Why the components of a closed, embedded surface (no face crossing another) do not bound one
 // solid, "" when they do. Faces point outward as given when `orientation` is +1 (inward: -1).
 // Every point off the surface must then have winding number 0 (outside) or 1 (inside), so a
@@ -274,9 +288,8 @@ std::shared_ptr<const BodyShape> BodyShape::build(std::shared_ptr<const Hierarch
     const double volume6 = enclosedVolume6(mesh, pos.data(), 0.5 * (shape->rest_lower_ + shape->rest_upper_));
     if (!(volume6 != 0)) {
       reason = "the surface encloses no volume";
-    } else if (const auto pair = firstSelfIntersection(mesh)) {
-      reason = "faces " + std::to_string(pair->first) + " and " + std::to_string(pair->second) +
-               " intersect (a self-intersecting surface)";
+    } else if (const std::string crossing = crossingFaces(mesh); !crossing.empty()) {
+      reason = crossing;
     } else if (std::string nested = nestingProblem(mesh, shape->edge_neighbor_, volume6 < 0 ? -1.0 : 1.0);
                !nested.empty()) {
       reason = nested;
