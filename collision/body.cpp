@@ -108,14 +108,20 @@ std::string nestingProblem(const Mesh& mesh, const std::vector<TriangleIndex>& e
   std::vector<Vec3> upper(count, Vec3::Constant(-std::numeric_limits<double>::infinity()));
   std::vector<uint32_t> begin(count + 1, 0);
   for (size_t f = 0; f < face_count; ++f) {
-    const Triangle& t = mesh.triangles[f];
     const uint32_t c = component[f];
     ++begin[c + 1];
-    volume6[c] += x[t[0]].dot(x[t[1]].cross(x[t[2]]));
-    for (VertexIndex v : t) {
+    for (VertexIndex v : mesh.triangles[f]) {
       lower[c] = lower[c].cwiseMin(x[v]);
       upper[c] = upper[c].cwiseMax(x[v]);
     }
+  }
+  // Each component's volume about its own box's centre (about the origin, the terms of a mesh
+  // far from it would cancel in rounding).
+  for (size_t f = 0; f < face_count; ++f) {
+    const Triangle& t = mesh.triangles[f];
+    const uint32_t c = component[f];
+    const Vec3 o = 0.5 * (lower[c] + upper[c]);
+    volume6[c] += (x[t[0]] - o).dot((x[t[1]] - o).cross(x[t[2]] - o));
   }
   for (size_t c = 0; c < count; ++c) begin[c + 1] += begin[c];
   std::vector<TriangleIndex> faces(face_count);

@@ -684,6 +684,12 @@ TEST_CASE("closed components nested the wrong way answer unsigned", "[service][s
     for (const Triangle& t : other.triangles) pair.triangles.push_back({base + t[0], base + t[1], base + t[2]});
   }
   CHECK(service.shapeFor(service.hierarchyFor(pair))->closed());
+  // The same far from the origin (each part's volume is taken about its own centre).
+  Mesh far = pair;
+  for (Vec3& x : far.positions) x += Vec3(1e8, -2e8, 3e8);
+  const auto far_shape = service.shapeFor(service.hierarchyFor(far));
+  INFO(far_shape->openReason());
+  CHECK(far_shape->closed());
   // More components than the nesting check compares (20,001 tetrahedra): unsigned, said so.
   Mesh many;
   for (int i = 0; i < 20001; ++i) {
