@@ -40,14 +40,53 @@ Vec3 vertexPseudonormal(const Mesh& mesh, const Vec3* positions, VertexIndex ver
   return sum;
 }
 
-// Six times the volume the faces enclose at `positions`, summed as tetrahedra from o (any
-// point: the sum of a closed surface does not depend on it; one near the surface keeps it
-// accurate). Positive when the faces point outward.
-double enclosedVolume6(const Mesh& mesh, const Vec3* positions, const Vec3& o) {
-  double volume6 = 0;
-  for (const Triangle& t : mesh.triangles)
-    volume6 += (positions[t[0]] - o).dot((positions[t[1]] - o).cross(positions[t[2]] - o));
+// Six times the volume the faces enclose at `positions`, each face's tetrahedron taken from a
+// vertex of its own component (origin[component[f]]): the sum of a closed component does not
+// depend on the point, and one on the component keeps it accurate wherever the parts lie (about
+// one point, parts far apart cancel in rounding). Positive when the faces point outward.
+// `magnitude` (optional) receives the sum of the terms' corner products, for their rounding.
+double enclosedVolume6(const Mesh& mesh, const Vec3* positions, const std::vector<uint32_t>& component,
+                       const std::vector<VertexIndex>& origin, double* magnitude = nullptr) {
+  double volume6 = 0, size = 0;
+  for (size_t f = 0; f < mesh.triangles.size(); ++f) {
+    const Triangle& t = mesh.triangles[f];
+    const Vec3& o = positions[origin[component[f]]];
+    const Vec3 a = positions[t[0]] - o, b = positions[t[1]] - o, c = positions[t[2]] - o;
+    volume6 += a.dot(b.cross(c));
+    if (magnitude) size += a.cwiseAbs().maxCoeff() * b.cwiseAbs().maxCoeff() * c.cwiseAbs().maxCoeff();
+  }
+  if (magnitude) *magnitude = size;
   return volume6;
+}
+
+// The components of a closed surface: faces joined across edges (edge_neighbor, every edge of a
+// closed surface has its neighbour). component[f] numbers them in order of their first face;
+// first_face[c] is that face.
+void labelComponents(const Mesh& mesh, const std::vector<TriangleIndex>& edge_neighbor,
+                     std::vector<uint32_t>& component, std::vector<TriangleIndex>& first_face) {
+  const size_t face_count = mesh.triangles.size();
+  constexpr uint32_t kNone = 0xffffffffu;
+  component.assign(face_count, kNone);
+  first_face.clear();
+  std::vector<TriangleIndex> stack;
+  for (size_t seed = 0; seed < face_count; ++seed) {
+    if (component[seed] != kNone) continue;
+    const uint32_t c = static_cast<uint32_t>(first_face.size());
+    first_face.push_back(static_cast<TriangleIndex>(seed));
+    component[seed] = c;
+    stack.assign(1, static_cast<TriangleIndex>(seed));
+    while (!stack.empty()) {
+      const TriangleIndex f = stack.back();
+      stack.pop_back();
+      for (int k = 0; k < 3; ++k) {
+        const TriangleIndex g = edge_neighbor[3 * static_cast<size_t>(f) + k];
+        if (g != kInvalidIndex && component[g] == kNone) {
+          component[g] = c;
+          stack.push_back(g);
+        }
+      }
+    }
+  }
 }
 
 // Why the surface is not embedded (two of its faces intersect), "" when it is. A mesh the test
@@ -67,38 +106,23 @@ std::string crossingFaces(const Mesh& mesh) {
 // Why the components of a closed, embedded surface (no face crossing another) do not bound one
 // solid, "" when they do. Faces point outward as given when `orientation` is +1 (inward: -1).
 // Every point off the surface must then have winding number 0 (outside) or 1 (inside), so a
-// component facing out must lie outside every other (winding number 0 of the others at one of
-// its vertices) and one facing in, a cavity, inside them (1). A ball inside a ball, both facing
-// out, fails: between them the inner ball's faces say outside. The winding number counts only
-// the components whose box holds the vertex (van Oosterom & Strackee solid angles).
-std::string nestingProblem(const Mesh& mesh, const std::vector<TriangleIndex>& edge_neighbor, double orientation) {
+// component facing out must lie outside every other (winding number 0 of the others at its
+// vertices) and one facing in, a cavity, inside them (1). A ball inside a ball, both facing
+// out, fails: between them the inner ball's faces say outside. The winding number (van
+// Oosterom & Strackee solid angles) counts only the components whose box holds the vertex, and
+// is taken at three vertices of each component (of its first, middle and last face): each must
+// agree, so one that lies within rounding of another component's face (where a solid angle of
+// about 2 pi can take either sign) cannot pass a wrong nesting. Bounded work: a mesh of more
+// than kMaxComponents components, or whose test would take more than kMaxSolidAngles solid
+// angles, is not checked (and not trusted).
+std::string nestingProblem(const Mesh& mesh, const std::vector<uint32_t>& component,
+                           const std::vector<TriangleIndex>& first_face, double orientation) {
   const size_t face_count = mesh.triangles.size();
-  // Components: faces joined across edges (every edge of a closed surface has its neighbour).
-  constexpr uint32_t kNone = 0xffffffffu;
-  std::vector<uint32_t> component(face_count, kNone);
-  std::vector<TriangleIndex> first_face, stack;
-  for (size_t seed = 0; seed < face_count; ++seed) {
-    if (component[seed] != kNone) continue;
-    const uint32_t c = static_cast<uint32_t>(first_face.size());
-    first_face.push_back(static_cast<TriangleIndex>(seed));
-    component[seed] = c;
-    stack.assign(1, static_cast<TriangleIndex>(seed));
-    while (!stack.empty()) {
-      const TriangleIndex f = stack.back();
-      stack.pop_back();
-      for (int k = 0; k < 3; ++k) {
-        const TriangleIndex g = edge_neighbor[3 * static_cast<size_t>(f) + k];
-        if (g != kInvalidIndex && component[g] == kNone) {
-          component[g] = c;
-          stack.push_back(g);
-        }
-      }
-    }
-  }
   const size_t count = first_face.size();
   if (count == 1) return "";
   // Pairs of boxes are compared: a bound on the work for meshes of very many components.
   constexpr size_t kMaxComponents = 20000;
+  constexpr uint64_t kMaxSolidAngles = 60'000'000;
   if (count > kMaxComponents)
     return std::to_string(count) + " components (more than " + std::to_string(kMaxComponents) +
            ": how they nest is not checked)";
@@ -130,27 +154,36 @@ std::string nestingProblem(const Mesh& mesh, const std::vector<TriangleIndex>& e
     for (size_t f = 0; f < face_count; ++f) faces[fill[component[f]]++] = static_cast<TriangleIndex>(f);
   }
   constexpr double kPi = 3.14159265358979323846;
+  uint64_t solid_angles = 0;
   for (size_t c = 0; c < count; ++c) {
     const double own = volume6[c] * orientation;
     if (!(own != 0))
       return "the component of face " + std::to_string(first_face[c]) + " encloses no volume";
-    const Vec3& p = x[mesh.triangles[first_face[c]][0]];
-    double winding = 0;
-    for (size_t d = 0; d < count; ++d) {
-      if (d == c || (p.array() < lower[d].array()).any() || (p.array() > upper[d].array()).any()) continue;
-      for (uint32_t i = begin[d]; i < begin[d + 1]; ++i) {
-        const Triangle& t = mesh.triangles[faces[i]];
-        const Vec3 a = x[t[0]] - p, b = x[t[1]] - p, e = x[t[2]] - p;
-        const double la = a.norm(), lb = b.norm(), le = e.norm();
-        winding += 2 * std::atan2(a.dot(b.cross(e)), la * lb * le + a.dot(b) * le + b.dot(e) * la + e.dot(a) * lb);
-      }
-    }
-    winding *= orientation / (4 * kPi);
     const double expected = own > 0 ? 0.0 : 1.0;
-    if (!(std::abs(winding - expected) < 0.5))
-      return "the component of face " + std::to_string(first_face[c]) + " lies " +
-             (own > 0 ? "inside another component, both facing out" : "outside the others, facing in") +
-             " (winding number " + std::to_string(static_cast<long>(std::lround(winding))) + " of the others there)";
+    const uint32_t middle = begin[c] + (begin[c + 1] - begin[c]) / 2;
+    for (const TriangleIndex face : {first_face[c], faces[middle], faces[begin[c + 1] - 1]}) {
+      const Vec3& p = x[mesh.triangles[face][0]];
+      double winding = 0;
+      for (size_t d = 0; d < count; ++d) {
+        if (d == c || (p.array() < lower[d].array()).any() || (p.array() > upper[d].array()).any()) continue;
+        solid_angles += begin[d + 1] - begin[d];
+        if (solid_angles > kMaxSolidAngles)
+          return std::to_string(count) + " components, nested too deep to check how (more than " +
+                 std::to_string(kMaxSolidAngles) + " solid angles)";
+        for (uint32_t i = begin[d]; i < begin[d + 1]; ++i) {
+          const Triangle& t = mesh.triangles[faces[i]];
+          const Vec3 a = x[t[0]] - p, b = x[t[1]] - p, e = x[t[2]] - p;
+          const double la = a.norm(), lb = b.norm(), le = e.norm();
+          winding += 2 * std::atan2(a.dot(b.cross(e)), la * lb * le + a.dot(b) * le + b.dot(e) * la + e.dot(a) * lb);
+        }
+      }
+      winding *= orientation / (4 * kPi);
+      if (!(std::abs(winding - expected) < 0.5))
+        return "the component of face " + std::to_string(first_face[c]) + " lies " +
+               (own > 0 ? "inside another component, both facing out" : "outside the others, facing in") +
+               " (winding number " + std::to_string(static_cast<long>(std::lround(winding))) +
+               " of the others at a vertex of face " + std::to_string(face) + ")";
+    }
   }
   return "";
 }
@@ -291,12 +324,16 @@ std::shared_ptr<const BodyShape> BodyShape::build(std::shared_ptr<const Hierarch
   // the faces of another, nearer part). So do components nested the wrong way (nestingProblem).
   // Both are treated as open too: unsigned answers, never a wrong sign.
   if (reason.empty()) {
-    const double volume6 = enclosedVolume6(mesh, pos.data(), 0.5 * (shape->rest_lower_ + shape->rest_upper_));
+    std::vector<TriangleIndex> first_face;
+    labelComponents(mesh, shape->edge_neighbor_, shape->face_component_, first_face);
+    shape->component_origin_.resize(first_face.size());
+    for (size_t c = 0; c < first_face.size(); ++c) shape->component_origin_[c] = mesh.triangles[first_face[c]][0];
+    const double volume6 = enclosedVolume6(mesh, pos.data(), shape->face_component_, shape->component_origin_);
     if (!(volume6 != 0)) {
       reason = "the surface encloses no volume";
     } else if (const std::string crossing = crossingFaces(mesh); !crossing.empty()) {
       reason = crossing;
-    } else if (std::string nested = nestingProblem(mesh, shape->edge_neighbor_, volume6 < 0 ? -1.0 : 1.0);
+    } else if (std::string nested = nestingProblem(mesh, shape->face_component_, first_face, volume6 < 0 ? -1.0 : 1.0);
                !nested.empty()) {
       reason = nested;
     } else {
@@ -366,17 +403,16 @@ PlacementOrientation BodyShape::placementOrientation(const Vec3* positions, bool
   const Mesh& m = mesh();
   if (!closed_ || m.triangles.empty()) return out;
   out.closed = true;
-  // About a vertex of the surface: the sum stays well conditioned wherever the body is placed.
-  const Vec3 o = positions[m.triangles[0][0]];
+  // About a vertex of each face's own component: the sum stays well conditioned wherever the
+  // body is placed and however far apart its parts lie.
   double magnitude = 0;
-  for (const Triangle& t : m.triangles) {
-    const Vec3 a = positions[t[0]] - o, b = positions[t[1]] - o, c = positions[t[2]] - o;
-    out.volume6 += a.dot(b.cross(c));
-    magnitude += a.cwiseAbs().maxCoeff() * b.cwiseAbs().maxCoeff() * c.cwiseAbs().maxCoeff();
-    if (!with_area) continue;
-    const Vec3 ab = b - a, ac = c - a;
-    out.edge_products += ab.cross(ac).norm();
-    out.edge_sums += ab.norm() + ac.norm();
+  out.volume6 = enclosedVolume6(m, positions, face_component_, component_origin_, &magnitude);
+  if (with_area) {
+    for (const Triangle& t : m.triangles) {
+      const Vec3 ab = positions[t[1]] - positions[t[0]], ac = positions[t[2]] - positions[t[0]];
+      out.edge_products += ab.cross(ac).norm();
+      out.edge_sums += ab.norm() + ac.norm();
+    }
   }
   out.faces = static_cast<double>(m.triangles.size());
   // Each term (at most 6 times the product of its corners' largest coordinates) errs by a few
@@ -413,7 +449,8 @@ Vec3 BodyShape::pseudonormalAsGiven(TriangleIndex triangle, Feature feature, con
 size_t BodyShape::bytes() const {
   return vertex_face_begin_.size() * sizeof(uint32_t) + vertex_faces_.size() * sizeof(TriangleIndex) +
          edge_neighbor_.size() * sizeof(TriangleIndex) +
-         (face_normals_.size() + edge_normals_.size() + vertex_normals_.size()) * sizeof(Vec3);
+         (face_normals_.size() + edge_normals_.size() + vertex_normals_.size()) * sizeof(Vec3) +
+         face_component_.size() * sizeof(uint32_t) + component_origin_.size() * sizeof(VertexIndex);
 }
 
 }  // namespace meshsweeper

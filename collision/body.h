@@ -129,6 +129,10 @@ class BodyShape {
   std::vector<Vec3> face_normals_;             // [triangle]
   std::vector<Vec3> edge_normals_;             // [3 * triangle + edge]
   std::vector<Vec3> vertex_normals_;           // [vertex]
+  // Closed shapes: [face] its component (faces joined across edges), [component] a vertex of it,
+  // the origin of its faces' volume terms (enclosedVolume6 in body.cpp).
+  std::vector<uint32_t> face_component_;
+  std::vector<VertexIndex> component_origin_;
 };
 
 // The unit normal of triangle (a, b, c) (right-hand rule), zero when its area is zero.

@@ -690,6 +690,58 @@ TEST_CASE("closed components nested the wrong way answer unsigned", "[service][s
   const auto far_shape = service.shapeFor(service.hierarchyFor(far));
   INFO(far_shape->openReason());
   CHECK(far_shape->closed());
+  // Parts far apart for their size (found by review): the orientation, at rest and at any
+  // placement (deforming and key-framed bodies), sums each part's volume about its own vertex.
+  // About one point the two balls' sum came out negative, and every sign of the deforming and
+  // key-framed bodies was inverted.
+  for (const double offset : {1e6, 2e6, 1e8}) {
+    INFO("offset " << offset);
+    Mesh apart = scenes::icosphere(2, 1.0);
+    const Mesh other = scenes::icosphere(2, 1.0);
+    const VertexIndex base = static_cast<VertexIndex>(apart.positions.size());
+    for (const Vec3& x : other.positions) apart.positions.push_back(x + Vec3::Constant(offset));
+    for (const Triangle& t : other.triangles) apart.triangles.push_back({base + t[0], base + t[1], base + t[2]});
+    DistanceService apart_service;
+    const auto h = apart_service.hierarchyFor(apart);
+    INFO(apart_service.shapeFor(h)->openReason());
+    REQUIRE(apart_service.shapeFor(h)->closed());
+    CHECK_FALSE(apart_service.shapeFor(h)->inward());
+    apart_service.addRigid(h);
+    apart_service.addDeforming(h, 0.01);
+    apart_service.addKeyframed(h, {apart.positions, apart.positions});
+    const std::vector<Vec3> probes = {Vec3(0, 0, 0.1), Vec3(0, 0, 2), Vec3(offset, offset, offset + 0.1),
+                                      Vec3(offset, offset, offset + 2)};
+    const StepResult r = apart_service.step(toMatrix(probes), kInf, QueryMode::kWithin);
+    for (size_t i = 0; i < probes.size(); ++i) {
+      INFO("probe " << i);
+      const auto hits = r.hits(i);
+      REQUIRE(hits.size() >= 3);  // the three bodies' faces within an infinite distance
+      for (const DistanceHit& hit : hits)
+        if (hit.distance == hits[0].distance) CHECK(hit.sign == (i % 2 == 0 ? HitSign::kInside : HitSign::kOutside));
+    }
+  }
+  // A tetrahedron inside a ball, both facing out, whose first vertex lies within rounding of
+  // the ball's face 5 (below it, found by review): the winding number there can take either
+  // side, so three vertices of each part are asked, and the mesh is open.
+  {
+    const Mesh ball = scenes::icosphere(2, 1.0);
+    const Triangle& t = ball.triangles[5];
+    const Vec3 &a = ball.positions[t[0]], &b = ball.positions[t[1]], &c = ball.positions[t[2]];
+    const Vec3 n = (b - a).cross(c - a).normalized();
+    const Vec3 p(-0.6067600013063138, 0.28482034928005084, 0.72386658276259597);
+    const Vec3 down = -0.2 * n, e1 = 0.1 * (b - a).normalized(), e2 = n.cross(e1);
+    Mesh tet;
+    tet.positions = {p, p + down + e1, p + down + e2, p + down - e1 - e2};
+    tet.triangles = {{0, 1, 2}, {0, 2, 3}, {0, 3, 1}, {1, 3, 2}};
+    double volume = 0;
+    for (const Triangle& u : tet.triangles)
+      volume += (tet.positions[u[0]] - p).dot((tet.positions[u[1]] - p).cross(tet.positions[u[2]] - p));
+    if (volume < 0)
+      for (Triangle& u : tet.triangles) std::swap(u[1], u[2]);
+    const auto near_shape = service.shapeFor(service.hierarchyFor(scenes::concatenate({ball, tet})));
+    CHECK_FALSE(near_shape->closed());
+    CHECK_THAT(near_shape->openReason(), Catch::Contains("inside another component"));
+  }
   // More components than the nesting check compares (20,001 tetrahedra): unsigned, said so.
   Mesh many;
   for (int i = 0; i < 20001; ++i) {
