@@ -44,15 +44,20 @@ Vec3 vertexPseudonormal(const Mesh& mesh, const Vec3* positions, VertexIndex ver
 // vertex of its own component (origin[component[f]]): the sum of a closed component does not
 // depend on the point, and one on the component keeps it accurate wherever the parts lie (about
 // one point, parts far apart cancel in rounding). Positive when the faces point outward.
-// `magnitude` (optional) receives the sum of the terms' corner products, for their rounding.
+// `magnitude` (optional) receives the sum of the terms' corner products, for their rounding;
+// `per_component` (optional) each component's own sum.
 double enclosedVolume6(const Mesh& mesh, const Vec3* positions, const std::vector<uint32_t>& component,
-                       const std::vector<VertexIndex>& origin, double* magnitude = nullptr) {
+                       const std::vector<VertexIndex>& origin, double* magnitude = nullptr,
+                       std::vector<double>* per_component = nullptr) {
   double volume6 = 0, size = 0;
+  if (per_component) per_component->assign(origin.size(), 0.0);
   for (size_t f = 0; f < mesh.triangles.size(); ++f) {
     const Triangle& t = mesh.triangles[f];
     const Vec3& o = positions[origin[component[f]]];
     const Vec3 a = positions[t[0]] - o, b = positions[t[1]] - o, c = positions[t[2]] - o;
-    volume6 += a.dot(b.cross(c));
+    const double term = a.dot(b.cross(c));
+    volume6 += term;
+    if (per_component) (*per_component)[component[f]] += term;
     if (magnitude) size += a.cwiseAbs().maxCoeff() * b.cwiseAbs().maxCoeff() * c.cwiseAbs().maxCoeff();
   }
   if (magnitude) *magnitude = size;
@@ -115,8 +120,10 @@ std::string crossingFaces(const Mesh& mesh) {
 // about 2 pi can take either sign) cannot pass a wrong nesting. Bounded work: a mesh of more
 // than kMaxComponents components, or whose test would take more than kMaxSolidAngles solid
 // angles, is not checked (and not trusted).
+// volume6[c]: component c's enclosed volume (enclosedVolume6's per_component).
 std::string nestingProblem(const Mesh& mesh, const std::vector<uint32_t>& component,
-                           const std::vector<TriangleIndex>& first_face, double orientation) {
+                           const std::vector<TriangleIndex>& first_face, const std::vector<double>& volume6,
+                           double orientation) {
   const size_t face_count = mesh.triangles.size();
   const size_t count = first_face.size();
   if (count == 1) return "";
@@ -127,7 +134,6 @@ std::string nestingProblem(const Mesh& mesh, const std::vector<uint32_t>& compon
     return std::to_string(count) + " components (more than " + std::to_string(kMaxComponents) +
            ": how they nest is not checked)";
   const auto& x = mesh.positions;
-  std::vector<double> volume6(count, 0.0);
   std::vector<Vec3> lower(count, Vec3::Constant(std::numeric_limits<double>::infinity()));
   std::vector<Vec3> upper(count, Vec3::Constant(-std::numeric_limits<double>::infinity()));
   std::vector<uint32_t> begin(count + 1, 0);
@@ -138,14 +144,6 @@ std::string nestingProblem(const Mesh& mesh, const std::vector<uint32_t>& compon
       lower[c] = lower[c].cwiseMin(x[v]);
       upper[c] = upper[c].cwiseMax(x[v]);
     }
-  }
-  // Each component's volume about its own box's centre (about the origin, the terms of a mesh
-  // far from it would cancel in rounding).
-  for (size_t f = 0; f < face_count; ++f) {
-    const Triangle& t = mesh.triangles[f];
-    const uint32_t c = component[f];
-    const Vec3 o = 0.5 * (lower[c] + upper[c]);
-    volume6[c] += (x[t[0]] - o).dot((x[t[1]] - o).cross(x[t[2]] - o));
   }
   for (size_t c = 0; c < count; ++c) begin[c + 1] += begin[c];
   std::vector<TriangleIndex> faces(face_count);
@@ -317,7 +315,7 @@ std::shared_ptr<const BodyShape> BodyShape::build(std::shared_ptr<const Hierarch
                                                             : " is degenerate (an angle within 2e-6 degree of 180)");
   }
   // Orientation: a closed surface whose faces point inward encloses a negative volume (summed
-  // over the faces, about the box's centre). It is the same solid: its normals are flipped, so
+  // over the faces, each part about a vertex of its own). It is the same solid: its normals are flipped, so
   // that signs still say inside and outside. One enclosing no volume has no inside.
   // A surface that intersects itself encloses no one solid: the sides of its faces, and so its
   // pseudonormals, do not tell inside from outside (a point inside one part can lie outside
@@ -328,12 +326,15 @@ std::shared_ptr<const BodyShape> BodyShape::build(std::shared_ptr<const Hierarch
     labelComponents(mesh, shape->edge_neighbor_, shape->face_component_, first_face);
     shape->component_origin_.resize(first_face.size());
     for (size_t c = 0; c < first_face.size(); ++c) shape->component_origin_[c] = mesh.triangles[first_face[c]][0];
-    const double volume6 = enclosedVolume6(mesh, pos.data(), shape->face_component_, shape->component_origin_);
+    std::vector<double> component_volume6;
+    const double volume6 = enclosedVolume6(mesh, pos.data(), shape->face_component_, shape->component_origin_,
+                                           nullptr, &component_volume6);
     if (!(volume6 != 0)) {
       reason = "the surface encloses no volume";
     } else if (const std::string crossing = crossingFaces(mesh); !crossing.empty()) {
       reason = crossing;
-    } else if (std::string nested = nestingProblem(mesh, shape->face_component_, first_face, volume6 < 0 ? -1.0 : 1.0);
+    } else if (std::string nested = nestingProblem(mesh, shape->face_component_, first_face, component_volume6,
+                                                   volume6 < 0 ? -1.0 : 1.0);
                !nested.empty()) {
       reason = nested;
     } else {
