@@ -176,7 +176,6 @@ struct Scratch {
   std::vector<uint32_t> begin;          // rebuilt CSR of a block
   std::vector<PairState> pairs;
   std::vector<TriangleHit> triangle_hits;
-  std::vector<DistanceHit> point_hits;
 };
 
 struct MeshCacheEntry {
@@ -833,7 +832,7 @@ struct DistanceService::Impl {
     for (uint32_t j = 0; j < count; ++j) {
       const size_t i = first + j;
       const Vec3 p = points.row(i).transpose();
-      s.point_hits.clear();
+      const size_t point_from = hits.size();  // the point's hits: hits[point_from, end)
       for (uint32_t k = states.begin[j]; k < states.begin[j + 1]; ++k) {
         if (k + 2 < states.pairs.size()) prefetchPair(states.pairs[k + 2]);
         PairState& pair = states.pairs[k];
@@ -847,22 +846,21 @@ struct DistanceService::Impl {
         stats.certified_pairs += certified;
         stats.triangles_tested += qs.counters().triangles_tested;
         s.streams[slot].leaves_tested += qs.counters().leaves_tested;
-        const size_t from = s.point_hits.size();
+        const size_t from = hits.size();
         if (s.triangle_hits.empty()) continue;
         // The first, closest hit gives every hit of this body its sign (signLikeClosest).
         for (const TriangleHit& t : s.triangle_hits)
-          s.point_hits.push_back(makeHit(slot, q, t.triangle, t.feature, t.point, t.barycentric, t.distance, touch,
-                                         s.point_hits.size() == from));
-        signLikeClosest(s.point_hits.data() + from, s.point_hits.data() + s.point_hits.size());
+          hits.push_back(makeHit(slot, q, t.triangle, t.feature, t.point, t.barycentric, t.distance, touch,
+                                 hits.size() == from));
+        signLikeClosest(hits.data() + from, hits.data() + hits.size());
         // Each body's hits come sorted (by distance, then triangle): merge the runs.
-        if (from > 0)
-          std::inplace_merge(s.point_hits.begin(), s.point_hits.begin() + static_cast<std::ptrdiff_t>(from),
-                             s.point_hits.end(), hitOrder);
+        if (from > point_from)
+          std::inplace_merge(hits.begin() + static_cast<std::ptrdiff_t>(point_from),
+                             hits.begin() + static_cast<std::ptrdiff_t>(from), hits.end(), hitOrder);
       }
-      out.begin_[i] = hits.size();  // block-local; offset added when the blocks are joined
-      out.count_[i] = static_cast<uint32_t>(s.point_hits.size());
-      hits.insert(hits.end(), s.point_hits.begin(), s.point_hits.end());
-      stats.hits += s.point_hits.size();
+      out.begin_[i] = point_from;  // in the block's hits
+      out.count_[i] = static_cast<uint32_t>(hits.size() - point_from);
+      stats.hits += hits.size() - point_from;
     }
     stats.states = states.pairs.size();
   }
@@ -1159,8 +1157,14 @@ void DistanceService::step(PointsRef points, double max_distance, QueryMode mode
     out.begin_.clear();
     out.hits_.resize(n);
     std::vector<std::vector<DistanceHit>>().swap(m.block_hits);  // a within step's hits
+    std::vector<std::vector<DistanceHit>>().swap(out.block_hits_);
   } else {
+    // Each block writes its hits into a vector of its own, which the result then takes (no
+    // copy); the result's vectors from its last within step come back as the blocks' room.
+    out.hits_.clear();
     out.begin_.resize(n);
+    out.block_size_ = bs;
+    m.block_hits.swap(out.block_hits_);
     m.block_hits.resize(block_count);
   }
   m.arena->execute([&] {
@@ -1177,19 +1181,11 @@ void DistanceService::step(PointsRef points, double max_distance, QueryMode mode
         tbb::simple_partitioner());
   });
   if (mode == QueryMode::kWithin) {
-    std::vector<size_t> offset(block_count + 1, 0);
-    for (size_t b = 0; b < block_count; ++b) offset[b + 1] = offset[b] + m.block_hits[b].size();
-    out.hits_.resize(offset[block_count]);
-    m.arena->execute([&] {
-      tbb::parallel_for(size_t(0), block_count, [&](size_t b) {
-        std::vector<DistanceHit>& hits = m.block_hits[b];
-        std::copy(hits.begin(), hits.end(), out.hits_.begin() + offset[b]);
-        // The result holds the hits now: keep room for about as many next step, no more.
-        if (hits.capacity() > 2 * hits.size() + 64) std::vector<DistanceHit>().swap(hits);
-        const size_t last = std::min(n, (b + 1) * bs);
-        for (size_t i = b * bs; i < last; ++i) out.begin_[i] += offset[b];
-      });
-    });
+    for (std::vector<DistanceHit>& hits : m.block_hits) {
+      // Keep room for about as many hits as this step's, no more.
+      if (hits.capacity() > 2 * hits.size() + 64) hits.shrink_to_fit();
+    }
+    out.block_hits_.swap(m.block_hits);
   }
   // Leaf blocks tested per body: how much a deforming body's inline faces would save.
   for (Body& b : m.bodies) b.leaves_tested = 0;

@@ -141,7 +141,9 @@ class StepResult {
   // kClosest: 0 or 1 hit. kWithin: every hit of the point, by increasing distance, then body
   // slot, then triangle index.
   Hits hits(size_t point) const {
-    const DistanceHit* first = hits_.data() + (mode_ == QueryMode::kClosest ? point : begin_[point]);
+    const DistanceHit* first = mode_ == QueryMode::kClosest
+                                   ? hits_.data() + point
+                                   : block_hits_[point / block_size_].data() + begin_[point];
     return {first, first + count_[point]};
   }
   const StepStats& stats() const { return stats_; }
@@ -152,8 +154,11 @@ class StepResult {
   double max_distance_ = 0;
   std::vector<PointStatus> status_;  // [point]
   std::vector<uint32_t> count_;      // [point] hits
-  std::vector<size_t> begin_;        // [point] kWithin: first hit in hits_
-  std::vector<DistanceHit> hits_;    // kClosest: [point] (valid where count_ is 1); kWithin: CSR
+  std::vector<size_t> begin_;        // [point] kWithin: first hit in its block's hits
+  std::vector<DistanceHit> hits_;    // kClosest: [point] (valid where count_ is 1)
+  // kWithin: the hits of points [b * block_size_, (b + 1) * block_size_), point by point.
+  std::vector<std::vector<DistanceHit>> block_hits_;
+  size_t block_size_ = 1;
   StepStats stats_;
 };
 

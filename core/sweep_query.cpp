@@ -214,6 +214,7 @@ size_t QueryStream::stateBytes() const {
   return sizeof(*this) + stack_.capacity() * sizeof(StackEntry) + heap_.capacity() * sizeof(FrontEntry) +
          set_faces_.capacity() * sizeof(TriangleIndex) + set_blocks_.capacity() * sizeof(TriangleBlock8) +
          gathered_.capacity() * sizeof(gathered_[0]) + within_keys_.capacity() * sizeof(within_keys_[0]) +
+         within_hits_.capacity() * sizeof(TriangleHit) +
          front_.capacity() * sizeof(DriftEntry) +
          popped_.capacity() * sizeof(DriftEntry);
 }
@@ -861,18 +862,16 @@ bool QueryStream::testSetWithin(const CoherentState& state, const Vec3& p, doubl
   const TreeGeometry& g = geometry();
   const Mesh& mesh = hierarchy_->mesh();
   const double d2 = d * d * (1 + 1e-9);
-  double exact[8];
   within_keys_.clear();
+  within_hits_.clear();
   for (uint32_t first = 0; first < state.count; first += 8) {
     if (state.block_lower[first / 8] - moved > d_up) break;  // sorted: the rest are farther
     const uint32_t lanes = std::min<uint32_t>(8, state.count - first);
     gatherTriangleBlock(mesh.triangles.data(), g.positions, state.faces + first, lanes, gather_);
-    squaredDistancesToBlock(p, gather_, exact);
+    keepWithin(p, gather_, state.faces + first, lanes, d2);
     counters_.triangles_tested += lanes;
-    for (uint32_t lane = 0; lane < lanes; ++lane)
-      if (exact[lane] <= d2) within_keys_.emplace_back(std::sqrt(exact[lane]), state.faces[first + lane]);
   }
-  finishWithin(p, d, out);
+  finishWithin(d, out);
   return true;
 }
 
@@ -1076,18 +1075,22 @@ void QueryStream::within(const Vec3& p, double d, std::vector<TriangleHit>& out)
   const float threshold = pruneThreshold(d * d, g.box_scale * g.box_scale);
   const TriangleIndex* lanes = h.leafTriangles().data();
   within_keys_.clear();
+  within_hits_.clear();
   stack_.clear();
   stack_.push_back({0, 0.0f});
   float dist[8];
-  double exact[8];
   while (!stack_.empty()) {
     const StackEntry entry = stack_.back();
     stack_.pop_back();
     if (isLeafRef(entry.ref)) {
       const int32_t leaf = leafIndex(entry.ref);
-      const uint32_t used = testLeaf(leaf, p, exact);
-      for (uint32_t lane = 0; lane < used; ++lane)
-        if (exact[lane] <= d * d * (1 + 1e-9)) within_keys_.emplace_back(std::sqrt(exact[lane]), lanes[8 * leaf + lane]);
+      const uint32_t used = h.leafLanes(leaf);
+      ++counters_.leaves_tested;
+      counters_.triangles_tested += used;
+      const TriangleBlock8* block = g.leaf_blocks ? &g.leaf_blocks[leaf] : &gather_;
+      // Moving geometry without inline faces: the lanes' corners from the positions.
+      if (!g.leaf_blocks) gatherLeafBlock(&h.leafCorners()[8 * static_cast<size_t>(leaf)], g.positions, gather_);
+      keepWithin(p, *block, lanes + 8 * static_cast<size_t>(leaf), used, d * d * (1 + 1e-9));
       continue;
     }
     const Node8& node = g.nodes[entry.ref];
@@ -1097,17 +1100,36 @@ void QueryStream::within(const Vec3& p, double d, std::vector<TriangleHit>& out)
       if (node.child[k] != kEmptyChild && dist[k] <= threshold) stack_.push_back({node.child[k], dist[k]});
     }
   }
-  finishWithin(p, d, out);
+  finishWithin(d, out);
 }
 
-// The hits of the faces in within_keys_ (distance, face) whose distance is <= d, in within()'s
-// order. The keys are sorted first (small entries, not the hits); the block kernel's distance
-// is the scalar one bit for bit, so the hits come out in order (checked, sorted if not).
-void QueryStream::finishWithin(const Vec3& p, double d, std::vector<TriangleHit>& out) {
+void QueryStream::keepWithin(const Vec3& p, const TriangleBlock8& block, const TriangleIndex* faces, uint32_t lanes,
+                             double d2) {
+  double exact[8];
+  closestPointsInBlock(p, block, exact, within_details_);
+  for (uint32_t lane = 0; lane < lanes; ++lane) {
+    if (!(exact[lane] <= d2)) continue;
+    const TriangleClosest c = blockLaneClosest(p, block, within_details_, static_cast<int>(lane));
+    TriangleHit hit;
+    hit.distance = std::sqrt(c.squared_distance);
+    hit.triangle = faces[lane];
+    hit.point = c.point;
+    hit.barycentric = c.barycentric;
+    hit.feature = c.feature;
+    within_keys_.push_back({std::sqrt(exact[lane]), faces[lane], static_cast<uint32_t>(within_hits_.size())});
+    within_hits_.push_back(hit);
+  }
+}
+
+// The hits found (within_keys_, within_hits_) whose distance is <= d, in within()'s order. The
+// keys are sorted (small entries, not the hits); each hit is the one hitOn() gives, from the
+// block kernel that computed its key's distance (the same bits: the hits come out in order,
+// checked, sorted if not).
+void QueryStream::finishWithin(double d, std::vector<TriangleHit>& out) {
   std::sort(within_keys_.begin(), within_keys_.end());
   out.clear();
-  for (const auto& key : within_keys_) {
-    const TriangleHit hit = hitOn(key.second, p);
+  for (const WithinKey& key : within_keys_) {
+    const TriangleHit& hit = within_hits_[key.hit];
     if (hit.distance <= d) out.push_back(hit);
   }
   if (!std::is_sorted(out.begin(), out.end(), hitBefore)) std::sort(out.begin(), out.end(), hitBefore);

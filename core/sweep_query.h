@@ -237,7 +237,9 @@ class QueryStream {
                TriangleIndex& face);
   bool testSetWithin(const CoherentState& state, const Vec3& p, double moved, double d,
                      std::vector<TriangleHit>& out);
-  void finishWithin(const Vec3& p, double d, std::vector<TriangleHit>& out);
+  // Within: the lanes of `block` (faces[lane]) within squared distance d2 of p, with their hits.
+  void keepWithin(const Vec3& p, const TriangleBlock8& block, const TriangleIndex* faces, uint32_t lanes, double d2);
+  void finishWithin(double d, std::vector<TriangleHit>& out);
   double depthFirst(const Vec3& p, double start2, double reach, TriangleIndex& best_face,
                     uint32_t capacity = 0);
   double entryBound(const DriftEntry& e, const Vec3& p, const float q[3], bool far) const;
@@ -267,7 +269,16 @@ class QueryStream {
   std::vector<TriangleBlock8> set_blocks_;  // candidates' coordinates, 8 per block
   std::vector<float> set_block_lower_;      // per block: its and later faces' least distance
   std::vector<std::pair<double, TriangleIndex>> gathered_;
-  std::vector<std::pair<double, TriangleIndex>> within_keys_;  // within: (distance, face) found
+  // Within: the faces found, (distance, face) and their hits in within_hits_.
+  struct WithinKey {
+    double distance;
+    TriangleIndex face;
+    uint32_t hit;
+    bool operator<(const WithinKey& o) const { return distance != o.distance ? distance < o.distance : face < o.face; }
+  };
+  std::vector<WithinKey> within_keys_;
+  std::vector<TriangleHit> within_hits_;
+  BlockClosest8 within_details_;
   double pruned_lower_ = 0;  // depthFirst with reach > 0: a lower bound on what it did not gather
   bool has_last_ = false;
   Vec3 last_point_ = Vec3::Zero();

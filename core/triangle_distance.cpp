@@ -224,6 +224,19 @@ struct LocalResult {
   int feature;     // rotated frame
 };
 
+// The caller's labelling of a result in the rotated frame (local corner i is corner (i + r) % 3).
+inline void unrotate(const LocalResult& res, int r, TriangleClosest& out) {
+  out.point = Vec3(res.point.x, res.point.y, res.point.z);
+  for (int i = 0; i < 3; ++i) out.barycentric[(i + r) % 3] = res.bary[i];
+  if (res.feature < 3) {
+    out.feature = static_cast<Feature>((res.feature + r) % 3);
+  } else if (res.feature < kLocalFace) {
+    out.feature = static_cast<Feature>(3 + (res.feature - 3 + r) % 3);
+  } else {
+    out.feature = Feature::kFace;
+  }
+}
+
 // The rotated corners and squared edge lengths of a triangle (the rest of the frame is
 // fillFrame's); r receives the rotation: local corner i is corner (i + r) % 3.
 inline Frame<double> rotatedFrame(const Vec3& ae, const Vec3& be, const Vec3& ce, int& r) {
@@ -372,15 +385,7 @@ inline double closestImpl(const Vec3& pe, const Vec3& ae, const Vec3& be, const 
   const double squared = squaredDistance(p, res.point);
   if (kDetails) {
     out->squared_distance = squared;
-    out->point = Vec3(res.point.x, res.point.y, res.point.z);
-    for (int i = 0; i < 3; ++i) out->barycentric[(i + r) % 3] = res.bary[i];
-    if (res.feature < 3) {
-      out->feature = static_cast<Feature>((res.feature + r) % 3);
-    } else if (res.feature < kLocalFace) {
-      out->feature = static_cast<Feature>(3 + (res.feature - 3 + r) % 3);
-    } else {
-      out->feature = Feature::kFace;
-    }
+    unrotate(res, r, *out);
   }
   return squared;
 }
@@ -482,9 +487,9 @@ inline typename Ops::V segmentSquared(const V3<typename Ops::V>& p, const V3<typ
   return squaredDistance(p, q);
 }
 
-template <class Ops>
+template <class Ops, bool kDetails = false>
 inline void blockLanes(const V3<typename Ops::V>& p, const TriangleBlock8& block, int lane,
-                       double* out) {
+                       double* out, BlockClosest8* details = nullptr) {
   using V = typename Ops::V;
   using M = typename Ops::M;
   const V zero = Ops::set1(0.0), one = Ops::set1(1.0);
@@ -549,12 +554,38 @@ inline void blockLanes(const V3<typename Ops::V>& p, const TriangleBlock8& block
   const V w = nw / den;
   const V3<V> o = select3<Ops>(Ops::orM(is_b, is_bc), f.b, select3<Ops>(is_c, f.c, f.a));
   const V3<V> e1v = select3<Ops>(is_bc, f.bc, f.ab);
-  V squared = squaredDistance(p, pointAt(o, v, e1v, w, f.ac));
+  const V3<V> point = pointAt(o, v, e1v, w, f.ac);
+  V squared = squaredDistance(p, point);
+  if (kDetails) {
+    // closestImpl's point (a vertex exactly) and coordinates, in the rotated frame.
+    const M is_a = c_a;
+    const V3<V> q = select3<Ops>(is_a, f.a, select3<Ops>(is_b, f.b, select3<Ops>(is_c, f.c, point)));
+    Ops::store(&details->point[0][lane], q.x);
+    Ops::store(&details->point[1][lane], q.y);
+    Ops::store(&details->point[2][lane], q.z);
+    const V b0 = Ops::select(is_face, va / s,
+                             Ops::select(is_ab, one - v, Ops::select(is_ac, one - w, Ops::select(is_a, one, zero))));
+    const V b1 = Ops::select(Ops::orM(is_face, is_ab), v, Ops::select(is_bc, one - v, Ops::select(is_b, one, zero)));
+    const V b2 = Ops::select(Ops::orM(is_face, is_ac), w, Ops::select(is_bc, v, Ops::select(is_c, one, zero)));
+    Ops::store(&details->bary[0][lane], b0);
+    Ops::store(&details->bary[1][lane], b1);
+    Ops::store(&details->bary[2][lane], b2);
+    V code = Ops::set1(kLocalFace);
+    code = Ops::select(is_a, Ops::set1(0), code);
+    code = Ops::select(is_b, Ops::set1(1), code);
+    code = Ops::select(is_c, Ops::set1(2), code);
+    code = Ops::select(is_ab, Ops::set1(kLocalEdgeAb), code);
+    code = Ops::select(is_bc, Ops::set1(kLocalEdgeBc), code);
+    code = Ops::select(is_ac, Ops::set1(kLocalEdgeCa), code);
+    Ops::store(&details->feature[lane], code);
+    Ops::store(&details->rotation[lane], Ops::select(r0, zero, Ops::select(r1, one, Ops::set1(2))));
+  }
 
   // Thin lanes (slivers, needles and degenerate ones; NaN too) are rare: one test for all.
   const V lab_lac = f.lab * f.lac;
   const V thin_scale = f.lbc * Ops::select(Ops::gt(f.lab, f.lac), f.lab, f.lac);
   const M thin = Ops::notM(Ops::gt(f.det, Ops::set1(kSliver) * thin_scale));
+  if (kDetails) Ops::store(&details->thin[lane], Ops::select(thin, one, zero));
   if (Ops::any(thin)) {
     const M degenerate = Ops::notM(Ops::gt(f.det, Ops::set1(kDegenerate) * lab_lac));
     const M projected = Ops::andNot(thin, degenerate);
@@ -602,6 +633,25 @@ void squaredDistancesToBlock(const Vec3& p, const TriangleBlock8& block, double 
   using V = BlockOps::V;
   const V3<V> pv{BlockOps::set1(p.x()), BlockOps::set1(p.y()), BlockOps::set1(p.z())};
   for (int lane = 0; lane < 8; lane += BlockOps::kWidth) blockLanes<BlockOps>(pv, block, lane, out);
+}
+
+void closestPointsInBlock(const Vec3& p, const TriangleBlock8& block, double out[8], BlockClosest8& details) {
+  using V = BlockOps::V;
+  const V3<V> pv{BlockOps::set1(p.x()), BlockOps::set1(p.y()), BlockOps::set1(p.z())};
+  for (int lane = 0; lane < 8; lane += BlockOps::kWidth) blockLanes<BlockOps, true>(pv, block, lane, out, &details);
+}
+
+TriangleClosest blockLaneClosest(const Vec3& p, const TriangleBlock8& block, const BlockClosest8& details, int lane) {
+  const auto corner = [&](int k) { return Vec3(block.v[k][0][lane], block.v[k][1][lane], block.v[k][2][lane]); };
+  if (details.thin[lane] != 0.0) return closestPointOnTriangle(p, corner(0), corner(1), corner(2));
+  LocalResult res;
+  res.point = {details.point[0][lane], details.point[1][lane], details.point[2][lane]};
+  for (int i = 0; i < 3; ++i) res.bary[i] = details.bary[i][lane];
+  res.feature = static_cast<int>(details.feature[lane]);
+  TriangleClosest out;
+  out.squared_distance = squaredDistance(V3<double>{p.x(), p.y(), p.z()}, res.point);
+  unrotate(res, static_cast<int>(details.rotation[lane]), out);
+  return out;
 }
 
 }  // namespace meshsweeper

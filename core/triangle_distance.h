@@ -37,6 +37,24 @@ struct alignas(64) TriangleBlock8 {
 // squaredDistanceToTriangle for that lane's triangle up to rounding (relative 1e-14).
 void squaredDistancesToBlock(const Vec3& p, const TriangleBlock8& block, double out[8]);
 
+// What closestPointsInBlock keeps of each lane for blockLaneClosest: the closest point and the
+// barycentric coordinates in the lane's rotated frame, its local feature and rotation, and
+// whether the lane is thin (answered by the scalar function).
+struct alignas(64) BlockClosest8 {
+  double point[3][8];
+  double bary[3][8];
+  double feature[8];   // local feature, 0..6
+  double rotation[8];  // local corner i is corner (i + rotation) % 3
+  double thin[8];      // 1: slivers, needles, degenerate and non-finite lanes
+};
+
+// squaredDistancesToBlock, keeping each lane's closest point for blockLaneClosest.
+void closestPointsInBlock(const Vec3& p, const TriangleBlock8& block, double out[8], BlockClosest8& details);
+
+// Lane `lane` of a block that closestPointsInBlock(p, block, ...) filled: closestPointOnTriangle
+// of that lane's triangle, bit for bit (the same formulas; thin lanes call it).
+TriangleClosest blockLaneClosest(const Vec3& p, const TriangleBlock8& block, const BlockClosest8& details, int lane);
+
 // Writes the triangle with corners t (indices into `positions`) into lane `lane` of the block.
 inline void setBlockLane(TriangleBlock8& block, uint32_t lane, const Vec3* positions, const Triangle& t) {
   for (int k = 0; k < 3; ++k) {

@@ -10,6 +10,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <cstring>
 #include <limits>
 #include <random>
 #include <sstream>
@@ -493,6 +494,39 @@ Vec3 laneCorner(const TriangleBlock8& block, int lane, int k) {
   return Vec3(block.v[k][0][lane], block.v[k][1][lane], block.v[k][2][lane]);
 }
 
+bool sameBits(double a, double b) { return std::memcmp(&a, &b, sizeof a) == 0; }
+bool sameBits(const Vec3& a, const Vec3& b) {
+  return sameBits(a.x(), b.x()) && sameBits(a.y(), b.y()) && sameBits(a.z(), b.z());
+}
+
+// closestPointsInBlock and blockLaneClosest against the scalar function, lane by lane: the
+// same bits (point, coordinates, squared distance), the same feature, and the block's squared
+// distances those of squaredDistancesToBlock. Returns the lanes that differ.
+int blockClosestMismatches(const Vec3& p, const TriangleBlock8& block) {
+  double plain[8], detailed[8];
+  BlockClosest8 details;
+  squaredDistancesToBlock(p, block, plain);
+  closestPointsInBlock(p, block, detailed, details);
+  int mismatches = 0;
+  for (int lane = 0; lane < 8; ++lane) {
+    const TriangleClosest got = blockLaneClosest(p, block, details, lane);
+    const TriangleClosest want =
+        closestPointOnTriangle(p, laneCorner(block, lane, 0), laneCorner(block, lane, 1), laneCorner(block, lane, 2));
+    const bool same = sameBits(plain[lane], detailed[lane]) && sameBits(got.squared_distance, want.squared_distance) &&
+                      sameBits(got.point, want.point) && sameBits(got.barycentric, want.barycentric) &&
+                      got.feature == want.feature;
+    if (!same && mismatches < 3) {
+      INFO("lane " << lane << " " << describe(p, laneCorner(block, lane, 0), laneCorner(block, lane, 1),
+                                               laneCorner(block, lane, 2))
+                   << " feature " << int(got.feature) << " / " << int(want.feature) << " squared "
+                   << got.squared_distance << " / " << want.squared_distance);
+      CHECK(same);
+    }
+    mismatches += !same;
+  }
+  return mismatches;
+}
+
 }  // namespace
 
 TEST_CASE("block of eight equals the scalar function", "[triangle_distance]") {
@@ -501,6 +535,7 @@ TEST_CASE("block of eight equals the scalar function", "[triangle_distance]") {
   std::uniform_int_distribution<int> kind(0, 9);
   const double scales[] = {1e-6, 1e-2, 1.0, 1e2, 1e6};
   int lanes_checked = 0;
+  int detail_mismatches = 0;
   for (double scale : scales) {
     for (int round = 0; round < 4000; ++round) {
       TriangleBlock8 block;
@@ -538,6 +573,11 @@ TEST_CASE("block of eight equals the scalar function", "[triangle_distance]") {
                                  laneCorner(block, target, 2), center, scale);
       double out[8];
       squaredDistancesToBlock(p, block, out);
+      detail_mismatches += blockClosestMismatches(p, block);
+      // Points on the lanes' vertices and edges too (the exact vertex, the edges' parameters).
+      detail_mismatches += blockClosestMismatches(laneCorner(block, target, round % 3), block);
+      detail_mismatches += blockClosestMismatches(
+          laneCorner(block, target, 0) + u(rng) * (laneCorner(block, target, 1) - laneCorner(block, target, 0)), block);
       for (int lane = 0; lane < 8; ++lane) {
         const Vec3 a = laneCorner(block, lane, 0), b = laneCorner(block, lane, 1),
                    c = laneCorner(block, lane, 2);
@@ -552,6 +592,7 @@ TEST_CASE("block of eight equals the scalar function", "[triangle_distance]") {
     }
   }
   CHECK(lanes_checked == 5 * 4000 * 8);
+  CHECK(detail_mismatches == 0);
 }
 
 TEST_CASE("block of eight: hand-made lanes", "[triangle_distance]") {
@@ -568,6 +609,7 @@ TEST_CASE("block of eight: hand-made lanes", "[triangle_distance]") {
   for (const Expected& e : handMadeCases()) {
     double out[8];
     squaredDistancesToBlock(e.p, block, out);
+    CHECK(blockClosestMismatches(e.p, block) == 0);
     for (int lane = 0; lane < 8; ++lane) {
       const Vec3 a = laneCorner(block, lane, 0), b = laneCorner(block, lane, 1),
                  c = laneCorner(block, lane, 2);
@@ -577,6 +619,25 @@ TEST_CASE("block of eight: hand-made lanes", "[triangle_distance]") {
       if (lane < 3) CHECK(out[lane] == e.squared_distance);
     }
   }
+}
+
+TEST_CASE("block of eight: closest points at negative zeros and exact corners", "[triangle_distance]") {
+  // A corner with negative zero coordinates is returned as it is (o + 0 * edge would make it
+  // +0), as the scalar function returns a vertex.
+  TriangleBlock8 block;
+  setLane(block, 0, {-0.0, -0.0, -0.0}, {4, 0, 0}, {0, 4, 0});
+  setLane(block, 1, {4, -0.0, 0}, {-0.0, 4, -0.0}, {-0.0, -0.0, 1});
+  setLane(block, 2, {-1, -0.0, -0.0}, {-0.0, -1, -0.0}, {-0.0, -0.0, -1});
+  setLane(block, 3, {1e300, 0, 0}, {0, 1e300, 0}, {0, 0, 1e300});  // Gram terms overflow: thin
+  setLane(block, 4, {0, 0, 0}, {std::numeric_limits<double>::infinity(), 0, 0}, {0, 1, 0});  // not finite
+  setLane(block, 5, {-0.0, 3, -0.0}, {-0.0, 5, -0.0}, {2, 3, -0.0});
+  setLane(block, 6, {0, 0, 0}, {1, 0, 0}, {0.5, 1e-9, 0});  // thin
+  setLane(block, 7, {-2, -2, -0.0}, {2, -2, -0.0}, {-0.0, 2, -0.0});
+  int mismatches = 0;
+  for (const Vec3& p : {Vec3(-1, -1, -1), Vec3(-0.0, -0.0, 5), Vec3(5, -0.0, -0.0), Vec3(-0.0, 5, -0.0),
+                        Vec3(1, 1, 1), Vec3(-0.0, -0.0, -0.0), Vec3(0.5, 0.5, -0.0), Vec3(-3, 7, 0)})
+    mismatches += blockClosestMismatches(p, block);
+  CHECK(mismatches == 0);
 }
 
 TEST_CASE("closest point: tiny slivers stay finite", "[triangle_distance]") {
