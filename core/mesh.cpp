@@ -79,13 +79,15 @@ double positionsDiagonal(const std::vector<Vec3>& positions) {
   if (positions.empty()) return 0;
   Vec3 lower, upper;
   positionsBounds(positions, lower, upper);
-  return (upper - lower).norm();
+  return (upper - lower).stableNorm();  // no underflow to 0 below 1e-154, no overflow
 }
 
 double meshDiagonal(const Mesh& mesh) {
   Vec3 lower, upper;
   meshBounds(mesh, lower, upper);
-  return (upper - lower).norm();
+  // A plain norm's square underflows to 0 below about 1e-154: such a mesh passed checkMesh's
+  // size check as a single point (found by review).
+  return (upper - lower).stableNorm();
 }
 
 }  // namespace meshsweeper

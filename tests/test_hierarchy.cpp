@@ -656,7 +656,9 @@ TEST_CASE("hierarchy: bad input throws MeshError with a useful message", "[hiera
     CHECK_NOTHROW(Hierarchy::build(mesh));
   }
   SECTION("sizes outside [1e-50, 1e50] (the exact distance would overflow or underflow)") {
-    for (const double scale : {1e60, 1e-60}) {
+    // Below about 1e-154 the diagonal's square underflows: it must not pass for a point (found
+    // by review: a sphere of size 1e-300 was accepted and answered 0 at 1e-300 from it).
+    for (const double scale : {1e60, 1e-60, 1e-160, 1e-300, 4e-320}) {
       Mesh mesh = scenes::icosphere(1, scale);
       mesh.name = "scaled-sphere";
       CHECK_THROWS_WITH(Hierarchy::build(mesh), Catch::Contains("scaled-sphere") && Catch::Contains("rescale"));
