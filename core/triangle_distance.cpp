@@ -6,18 +6,17 @@
 // For one triangle (scalar) and for each lane of a block (SIMD) alike:
 //   1. rotate the corners (a, b, c) so that a is opposite the longest edge, i.e. at the largest
 //      angle; ab and ac are then the two shortest edges;
-//   2. det = |ab x ac|^2; if det <= kDegenerate * |ab|^2 |ac|^2 (sin^2 of the largest angle; this
-//      holds for segments, points and caps) the triangle is degenerate: answer with the closest
-//      of its three segments (zero-length segments give their end point);
-//   3. if sin^2 of the smallest angle < kSliver (a thin triangle: a sliver, whose largest angle
-//      is near 180 degrees and whose Gram numerators below lose eps / sin^2 of |ap|, or a
-//      needle, two long edges and a short one, whose barycentric coordinates lose eps of |ap|
-//      divided by the short edge and then multiply the long ones), the projection q of p onto
-//      the plane when q lies in the triangle (edge functions n.(edge x (q - corner)) >= 0,
-//      accurate to eps / sin of the largest angle), else the closest of the three segments. A
-//      needle returns q as computed (its normal is accurate: the largest angle is far from
-//      180 degrees); a sliver rebuilds it from its coordinates (its normal is not: the point
-//      stays on the triangle and errs along it);
+//   2. a sliver or cap (sin^2 of the largest angle below kSliver, down to collinear in
+//      doubles): the projection q of p onto the plane, and its edge functions, in quadruple
+//      precision from the same doubles (the normal's relative error eps / sin of the largest
+//      angle becomes 1e-34 / sin); q inside: the point rebuilt from its coordinates; else, or
+//      when even quadruple precision finds the corners collinear (sin^2 <= 1e-34), the closest
+//      of the three segments (zero-length segments give their end point);
+//   3. a needle (sin^2 of the smallest angle below kSliver, the largest not near 180 degrees:
+//      its normal is accurate): q and its edge functions in doubles, in quadruple precision
+//      where an edge function lies within its rounding of 0 (q near an edge's line, as beyond
+//      the tip); q inside: q itself, its coordinates from the quadruple edge functions; else
+//      the closest segment;
 //   otherwise Ericson's tests, first match wins, with d1 = ab.ap, d2 = ac.ap, e = bc.bp,
 //      vb = |ac|^2 d1 - (ab.ac) d2, vc = |ab|^2 d2 - (ab.ac) d1, va = det - vb - vc:
 //        vertex a   d1 <= 0 and d2 <= 0
@@ -30,25 +29,22 @@
 //   4. point = O + v*E1 + w*E2 (O a corner, E1 and E2 edges; a vertex is returned exactly) and
 //      squared distance = |p - point|^2 of that returned point.
 // The block runs the same formulas (the same templates, with explicit FMAs) on every lane, every
-// case computed and the first matching one selected with masks: AVX-512 (8 lanes), AVX2 (2 x 4)
-// or plain scalar code, by the instruction set compiled for. Its values are the scalar ones bit
+// case of step 4 computed and the first matching one selected with masks: AVX-512 (8 lanes),
+// AVX2 (2 x 4) or plain scalar code, by the instruction set compiled for; its thin lanes (steps
+// 2 and 3, and non-finite ones) call the scalar function. Its values are the scalar ones bit
 // for bit (the tests compare them on random and degenerate lanes).
 //
 // What is not computed exactly (\bug):
-//  - caps below kDegenerate (a largest angle within about 2e-6 degree of 180) are answered by
-//    their segments, off by up to half the cap's height (1.6e-8 of its length at the
-//    threshold) for a point on it; thin triangles above it go through the projection (step 3),
-//    whose normal and inside test err by about eps * |ap| / sin of the largest angle (7e-9 of
-//    |ap| at the threshold, 2e-11 at sin^2 1e-10); elsewhere the error is the rounding of the
-//    returned point, a few eps * |coordinates| (absolute: a mesh far from the origin loses
-//    digits on small distances);
-//  - a needle whose short edge lies almost along its long ones is a sliver (largest angle near
-//    180 degrees): its point is rebuilt from coordinates that lose eps over the short edge, so
-//    a point near its tip can be off by about 1e-13 of the coordinates when the short edge is
-//    1e-5 of the long ones, 7e-9 at 1e-6 (measured against a 113-bit reference);
+//  - the rounding of the returned point, a few eps * |coordinates| (absolute: a mesh far from
+//    the origin loses digits on small distances);
+//  - a triangle collinear to quadruple precision (sin^2 of its largest angle <= 1e-34) is
+//    answered by its segments, off by at most half its height (5e-18 of its length);
 //  - the Gram terms are fourth powers of coordinate differences: beyond about 1e75 (or below
-//    1e-75) they overflow (underflow) and the triangle is treated as degenerate (meshes are
-//    limited to sizes in [1e-50, 1e50], core/mesh.h).
+//    1e-75) they overflow (underflow) (meshes are limited to sizes in [1e-50, 1e50],
+//    core/mesh.h).
+// Cost: a sliver tested costs about a hundred software quadruple-precision operations (a mesh
+// made mostly of slivers, mpi, queries about 6 times slower than with doubles alone); a needle
+// only near its edges' lines.
 #include "core/triangle_distance.h"
 
 #include <cmath>
@@ -60,10 +56,9 @@
 namespace meshsweeper {
 namespace {
 
-// sin^2 of the largest angle below which a triangle is answered by its segments. The two worst
-// errors described above meet there: the projection's eps / sin (of |ap|) and the segments'
-// half height, sin / 2 (of the length), equal at sin^2 = 2 eps. (It was 1e-10, where the
-// segments answered a point lying on a cap 2.4e-6 away, half its height; found by review.)
+// sin^2 of the largest angle at or below which a triangle has no reliable normal in doubles
+// (isDegenerateTriangle: the projection's error eps / sin of |ap| reaches the half height,
+// sin / 2, of the length at sin^2 = 2 eps). The distance itself no longer stops there (step 2).
 constexpr double kDegenerate = 1e-15;
 // sin^2 of the smallest angle below which a triangle is thin (an angle below about 1.8
 // degrees): a sliver's Gram numerators lose about eps / sin^2 of |ap| (measured: a point on a
@@ -106,6 +101,16 @@ inline Double4 mulAdd(Double4 a, Double4 b, Double4 c) {
 #endif
 }
 #endif
+
+// The rare triangles whose plane double precision cannot place (slivers and caps, and points
+// at the edge of a needle) are answered in quadruple precision (113-bit significand), from
+// the same double inputs: software arithmetic, about a hundred operations a triangle.
+#if defined(__SIZEOF_FLOAT128__)
+using Quad = __float128;
+#else
+using Quad = long double;  // IEEE quad where the ABI makes it so (AArch64 Linux); else less
+#endif
+inline Quad mulAdd(Quad a, Quad b, Quad c) { return a * b + c; }
 
 template <class T>
 struct V3 {
@@ -211,6 +216,74 @@ inline Projection<T> projectOnPlane(const V3<T>& p, const Frame<T>& f) {
 
 inline double clamp01(double x) { return x > 1.0 ? 1.0 : (x < 0.0 ? 0.0 : x); }
 
+// sin^2 of the largest angle at or below which quadruple precision finds no plane either: the
+// corners are collinear to its rounding, and the segments answer (off by at most half the
+// height, sin / 2 of the length: 5e-18 of it at this threshold).
+constexpr double kQuadDegenerate = 1e-34;
+
+template <class T, class S>
+inline V3<T> widen(const V3<S>& v) {
+  return {static_cast<T>(v.x), static_cast<T>(v.y), static_cast<T>(v.z)};
+}
+template <class T, class S>
+inline V3<T> narrow(const V3<S>& v) {
+  return {static_cast<T>(v.x), static_cast<T>(v.y), static_cast<T>(v.z)};
+}
+
+// The projection of p onto the plane of the rotated triangle f, in quadruple precision from the
+// same double corners: the normal's relative error is then about 1e-34 / sin of the largest
+// angle instead of 1e-16 / sin.
+struct QuadPlane {
+  bool degenerate = true;  // sin^2 of the largest angle <= kQuadDegenerate: no plane
+  bool inside = false;     // the projection lies in the closed triangle
+  V3<double> q{};          // the projection, rounded
+  V3<double> rebuilt{};    // a + v ab + w ac from its coordinates (inside), rounded
+  double bary[3] = {};     // its coordinates in the rotated frame (inside)
+};
+inline QuadPlane quadProjection(const V3<double>& p, const Frame<double>& f) {
+  QuadPlane r;
+  Frame<Quad> g;
+  g.a = widen<Quad>(f.a);
+  g.b = widen<Quad>(f.b);
+  g.c = widen<Quad>(f.c);
+  const V3<Quad> ab = g.b - g.a, ac = g.c - g.a, bc = g.c - g.b;
+  g.lab = dot(ab, ab);
+  g.lac = dot(ac, ac);
+  g.lbc = dot(bc, bc);
+  const V3<Quad> pq = widen<Quad>(p);
+  fillFrame(pq, g);
+  r.degenerate = !(g.det > static_cast<Quad>(kQuadDegenerate) * (g.lab * g.lac));
+  if (r.degenerate) return r;
+  const Projection<Quad> pr = projectOnPlane(pq, g);
+  r.q = narrow<double>(pr.q);
+  const Quad zero = 0;
+  const Quad sum = pr.wa + pr.wb + pr.wc;
+  r.inside = pr.wa >= zero && pr.wb >= zero && pr.wc >= zero && sum > zero;
+  if (!r.inside) return r;
+  const Quad v = pr.wb / sum, w = pr.wc / sum;
+  r.rebuilt = narrow<double>(pointAt(g.a, v, g.ab, w, g.ac));
+  r.bary[0] = static_cast<double>(pr.wa / sum);
+  r.bary[1] = static_cast<double>(v);
+  r.bary[2] = static_cast<double>(w);
+  return r;
+}
+
+// Whether the signs of a needle's double edge functions (its projection inside or outside) are
+// certain: each |w| against a bound on its rounding, 256 eps |n| |edge| (|q - corner| + the
+// largest coordinate). Near an edge's line (within about 1e-13 of the coordinates; a point
+// beyond the tip lies near two) they are not, and the quadruple precision decides.
+inline bool edgeSignsCertain(const V3<double>& p, const Frame<double>& f, const Projection<double>& pr) {
+  const auto maxAbs = [](const V3<double>& v) { return std::max({std::abs(v.x), std::abs(v.y), std::abs(v.z)}); };
+  const auto norm1 = [](const V3<double>& v) { return std::abs(v.x) + std::abs(v.y) + std::abs(v.z); };
+  const double m = std::max({maxAbs(p), maxAbs(f.a), maxAbs(f.b), maxAbs(f.c)});
+  constexpr double k = 256 * 2.220446049250313e-16;
+  const auto certain = [&](double w, double edge2, const V3<double>& corner) {
+    const double r = norm1(pr.q - corner) + m;
+    return w * w > (k * k) * f.det * edge2 * (r * r);
+  };
+  return certain(pr.wa, f.lbc, f.b) && certain(pr.wb, f.lac, f.c) && certain(pr.wc, f.lab, f.a);
+}
+
 // ---------------------------------------------------------------------------------------------
 // Scalar: branchy region logic in the rotated frame, mapped back to the caller's labelling.
 
@@ -284,39 +357,69 @@ inline double closestImpl(const Vec3& pe, const Vec3& ae, const Vec3& be, const 
     res.feature = feature;
   };
 
-  const bool degenerate = isDegenerate(f.det, f.lab, f.lac);
-  const bool thin = !degenerate && isThin(f.det, f.lab, f.lac, f.lbc);
-  const bool needle = thin && !isSliver(f.det, f.lab, f.lac);
-  Projection<double> proj{};
-  if (thin) proj = projectOnPlane(p, f);
-  // (Edge functions of a sliver with edges near 1e-80 underflow to 0: not inside then.)
-  const bool thin_face = thin && proj.wa >= 0.0 && proj.wb >= 0.0 && proj.wc >= 0.0 &&
-                         proj.wa + proj.wb + proj.wc > 0.0;
-  if (thin_face) {
-    // The projection lies in the thin triangle: the closest point, as computed for a needle
-    // (rebuilt from its coordinates it would carry their error times the long edges), from
-    // its barycentric coordinates for a sliver.
-    const double s = proj.wa + proj.wb + proj.wc;  // > 0: a positive sum of three >= 0 terms
-    const double v = proj.wb / s;
-    const double w = proj.wc / s;
-    res.point = needle ? proj.q : pointAt(f.a, v, f.ab, w, f.ac);
-    if (kDetails) {
-      if (needle) {
-        // A needle's edge functions cross its short edge (wa loses eps * |ap| over it); its
-        // Gram numerators are accurate (its largest angle is far from 180 degrees).
-        const double ga = f.va > 0.0 ? f.va : 0.0, gb = f.vb > 0.0 ? f.vb : 0.0, gc = f.vc > 0.0 ? f.vc : 0.0;
-        const double g = ga + gb + gc;
-        res.bary[0] = g > 0.0 ? ga / g : proj.wa / s;
-        res.bary[1] = g > 0.0 ? gb / g : v;
-        res.bary[2] = g > 0.0 ? gc / g : w;
-      } else {
-        res.bary[0] = proj.wa / s;
-        res.bary[1] = v;
-        res.bary[2] = w;
-      }
-      res.feature = kLocalFace;
+  // Corners or point not finite (overflowed terms included): the segments answer.
+  const bool finite = std::isfinite(f.det) && std::isfinite(f.lab) && std::isfinite(f.lac) && std::isfinite(f.lbc) &&
+                      std::isfinite(f.d1) && std::isfinite(f.d2) && std::isfinite(f.e) && std::isfinite(f.dab);
+  // A sliver or cap (largest angle near 180 degrees, down to collinear in doubles): its plane
+  // from quadruple precision. A needle (smallest angle small, largest not near 180): its plane
+  // from doubles, with quadruple precision where an edge function's sign is in doubt.
+  const bool sliver = finite && isSliver(f.det, f.lab, f.lac);
+  const bool needle = finite && !sliver && isThin(f.det, f.lab, f.lac, f.lbc);
+  const bool thin = sliver || needle;
+  QuadPlane quad;
+  bool quad_done = false;
+  bool thin_face = false;
+  V3<double> face_point{};
+  if (sliver) {
+    quad = quadProjection(p, f);
+    quad_done = true;
+    thin_face = !quad.degenerate && quad.inside;
+    face_point = quad.rebuilt;
+  } else if (needle) {
+    const Projection<double> proj = projectOnPlane(p, f);
+    if (edgeSignsCertain(p, f, proj)) {
+      thin_face = proj.wa >= 0.0 && proj.wb >= 0.0 && proj.wc >= 0.0;
+      face_point = proj.q;
+    } else {
+      quad = quadProjection(p, f);
+      quad_done = true;
+      thin_face = !quad.degenerate && quad.inside;
+      face_point = quad.q;
     }
-  } else if (degenerate || thin) {
+  }
+  // In quadruple precision a projection on an edge's line has that edge function exactly 0:
+  // on two of them it is the corner (returned exactly), on one an edge.
+  int thin_feature = kLocalFace;
+  if (thin_face && quad_done) {
+    const bool zero[3] = {quad.bary[0] == 0.0, quad.bary[1] == 0.0, quad.bary[2] == 0.0};
+    const int zeros = zero[0] + zero[1] + zero[2];
+    if (zeros == 2) {
+      thin_feature = !zero[0] ? 0 : (!zero[1] ? 1 : 2);
+      face_point = thin_feature == 0 ? f.a : (thin_feature == 1 ? f.b : f.c);
+    } else if (zeros == 1) {
+      thin_feature = zero[0] ? kLocalEdgeBc : (zero[1] ? kLocalEdgeCa : kLocalEdgeAb);
+    }
+  }
+  if (thin_face) {
+    // The projection lies in the thin triangle: a needle's as computed (its normal is
+    // accurate), a sliver's rebuilt from its coordinates (its plane's normal is not: the point
+    // stays on the triangle). Coordinates from the quadruple-precision edge functions (a
+    // needle's Gram numerators cancel; its double edge functions lose eps over its short edge).
+    res.point = face_point;
+    if (kDetails) {
+      if (!quad_done) quad = quadProjection(p, f);
+      for (int i = 0; i < 3; ++i) res.bary[i] = quad.bary[i];
+      if (!quad.inside) {  // a needle certain in doubles but on an edge in quad: its point's edge
+        const Projection<double> proj = projectOnPlane(p, f);
+        const double wa = std::max(proj.wa, 0.0), wb = std::max(proj.wb, 0.0), wc = std::max(proj.wc, 0.0);
+        const double sum = wa + wb + wc;
+        res.bary[0] = sum > 0 ? wa / sum : 1.0;
+        res.bary[1] = sum > 0 ? wb / sum : 0.0;
+        res.bary[2] = sum > 0 ? wc / sum : 0.0;
+      }
+      res.feature = thin_feature;
+    }
+  } else if (!finite || thin) {
     // Closest of the segments ab, bc, ac (first wins ties); a segment end is returned exactly.
     // For a sliver whose plane projection of p falls outside it, the closest point is on its
     // boundary.
@@ -400,6 +503,7 @@ struct ScalarOps {
   using M = bool;
   static constexpr int kWidth = 1;
   static V load(const double* x) { return *x; }
+  static V loadu(const double* x) { return *x; }
   static void store(double* x, V v) { *x = v; }
   static V set1(double x) { return x; }
   static M le(V a, V b) { return a <= b; }
@@ -420,6 +524,7 @@ struct Avx512Ops {
   using M = __mmask8;
   static constexpr int kWidth = 8;
   static V load(const double* x) { return _mm512_load_pd(x); }
+  static V loadu(const double* x) { return _mm512_loadu_pd(x); }
   static void store(double* x, V v) { _mm512_storeu_pd(x, v); }
   static V set1(double x) { return _mm512_set1_pd(x); }
   static M le(V a, V b) { return _mm512_cmp_pd_mask(a, b, _CMP_LE_OQ); }
@@ -440,6 +545,7 @@ struct Avx2Ops {
   using M = Double4;
   static constexpr int kWidth = 4;
   static V load(const double* x) { return _mm256_load_pd(x); }
+  static V loadu(const double* x) { return _mm256_loadu_pd(x); }
   static void store(double* x, V v) { _mm256_storeu_pd(x, v); }
   static V set1(double x) { return _mm256_set1_pd(x); }
   static M le(V a, V b) { return _mm256_cmp_pd(a, b, _CMP_LE_OQ); }
@@ -470,25 +576,8 @@ inline V3<typename Ops::V> select3(typename Ops::M m, const V3<typename Ops::V>&
   return {Ops::select(m, a.x, b.x), Ops::select(m, a.y, b.y), Ops::select(m, a.z, b.z)};
 }
 
-// One segment candidate of the degenerate case: o + t*dir, its end returned exactly.
-template <class Ops>
-inline typename Ops::V segmentSquared(const V3<typename Ops::V>& p, const V3<typename Ops::V>& o,
-                                      const V3<typename Ops::V>& end,
-                                      const V3<typename Ops::V>& dir, typename Ops::V num,
-                                      typename Ops::V len, const V3<typename Ops::V>& ac) {
-  using V = typename Ops::V;
-  const V zero = Ops::set1(0.0), one = Ops::set1(1.0);
-  const typename Ops::M positive = Ops::gt(len, zero);
-  V t = num / Ops::select(positive, len, one);
-  t = Ops::select(Ops::gt(t, one), one, Ops::select(Ops::lt(t, zero), zero, t));
-  t = Ops::select(positive, t, zero);
-  V3<V> q = pointAt(o, t, dir, zero, ac);
-  q = select3<Ops>(Ops::le(t, zero), o, select3<Ops>(Ops::ge(t, one), end, q));
-  return squaredDistance(p, q);
-}
-
 template <class Ops, bool kDetails = false>
-inline void blockLanes(const V3<typename Ops::V>& p, const TriangleBlock8& block, int lane,
+inline void blockLanes(const Vec3& ps, const V3<typename Ops::V>& p, const TriangleBlock8& block, int lane,
                        double* out, BlockClosest8* details = nullptr) {
   using V = typename Ops::V;
   using M = typename Ops::M;
@@ -581,30 +670,23 @@ inline void blockLanes(const V3<typename Ops::V>& p, const TriangleBlock8& block
     Ops::store(&details->rotation[lane], Ops::select(r0, zero, Ops::select(r1, one, Ops::set1(2))));
   }
 
-  // Thin lanes (slivers, needles and degenerate ones; NaN too) are rare: one test for all.
-  const V lab_lac = f.lab * f.lac;
+  // Thin lanes (slivers, needles and degenerate ones; NaN too) are rare: one test for all, and
+  // those lanes take the scalar function (quadruple precision where it needs it).
   const V thin_scale = f.lbc * Ops::select(Ops::gt(f.lab, f.lac), f.lab, f.lac);
   const M thin = Ops::notM(Ops::gt(f.det, Ops::set1(kSliver) * thin_scale));
   if (kDetails) Ops::store(&details->thin[lane], Ops::select(thin, one, zero));
   if (Ops::any(thin)) {
-    const M degenerate = Ops::notM(Ops::gt(f.det, Ops::set1(kDegenerate) * lab_lac));
-    const M projected = Ops::andNot(thin, degenerate);
-    const V s_ab = segmentSquared<Ops>(p, f.a, f.b, f.ab, f.d1, f.lab, f.ac);
-    const V s_bc = segmentSquared<Ops>(p, f.b, f.c, f.bc, f.e, f.lbc, f.ac);
-    const V s_ac = segmentSquared<Ops>(p, f.a, f.c, f.ac, f.d2, f.lac, f.ac);
-    V best = s_ab;
-    best = Ops::select(Ops::lt(s_bc, best), s_bc, best);
-    best = Ops::select(Ops::lt(s_ac, best), s_ac, best);
-    if (Ops::any(projected)) {  // the projection when it lies in the thin triangle, else its boundary
-      const Projection<V> pr = projectOnPlane(p, f);
-      const M inside = Ops::andM(Ops::ge(pr.wa, zero), Ops::andM(Ops::ge(pr.wb, zero), Ops::ge(pr.wc, zero)));
-      const V s = pr.wa + pr.wb + pr.wc;
-      // A needle's projection as computed; a sliver's rebuilt from its coordinates.
-      const M needle = Ops::gt(f.det, Ops::set1(kSliver) * lab_lac);
-      const V3<V> q = select3<Ops>(needle, pr.q, pointAt(f.a, pr.wb / s, f.ab, pr.wc / s, f.ac));
-      best = Ops::select(Ops::andM(Ops::andM(projected, inside), Ops::gt(s, zero)), squaredDistance(p, q), best);
+    double flags[Ops::kWidth], values[Ops::kWidth];
+    Ops::store(flags, Ops::select(thin, one, zero));
+    Ops::store(values, squared);
+    for (int k = 0; k < Ops::kWidth; ++k) {
+      if (flags[k] == 0.0) continue;
+      const int l = lane + k;
+      values[k] = closestImpl<false>(ps, Vec3(block.v[0][0][l], block.v[0][1][l], block.v[0][2][l]),
+                                     Vec3(block.v[1][0][l], block.v[1][1][l], block.v[1][2][l]),
+                                     Vec3(block.v[2][0][l], block.v[2][1][l], block.v[2][2][l]), nullptr);
     }
-    squared = Ops::select(Ops::orM(degenerate, projected), best, squared);
+    squared = Ops::loadu(values);
   }
   Ops::store(out + lane, squared);
 }
@@ -632,13 +714,13 @@ bool isDegenerateTriangle(const Vec3& ae, const Vec3& be, const Vec3& ce) {
 void squaredDistancesToBlock(const Vec3& p, const TriangleBlock8& block, double out[8]) {
   using V = BlockOps::V;
   const V3<V> pv{BlockOps::set1(p.x()), BlockOps::set1(p.y()), BlockOps::set1(p.z())};
-  for (int lane = 0; lane < 8; lane += BlockOps::kWidth) blockLanes<BlockOps>(pv, block, lane, out);
+  for (int lane = 0; lane < 8; lane += BlockOps::kWidth) blockLanes<BlockOps>(p, pv, block, lane, out);
 }
 
 void closestPointsInBlock(const Vec3& p, const TriangleBlock8& block, double out[8], BlockClosest8& details) {
   using V = BlockOps::V;
   const V3<V> pv{BlockOps::set1(p.x()), BlockOps::set1(p.y()), BlockOps::set1(p.z())};
-  for (int lane = 0; lane < 8; lane += BlockOps::kWidth) blockLanes<BlockOps, true>(pv, block, lane, out, &details);
+  for (int lane = 0; lane < 8; lane += BlockOps::kWidth) blockLanes<BlockOps, true>(p, pv, block, lane, out, &details);
 }
 
 TriangleClosest blockLaneClosest(const Vec3& p, const TriangleBlock8& block, const BlockClosest8& details, int lane) {

@@ -22,9 +22,10 @@ TriangleClosest closestPointOnTriangle(const Vec3& p, const Vec3& a, const Vec3&
 // (relative 1e-14) and is cheaper.
 double squaredDistanceToTriangle(const Vec3& p, const Vec3& a, const Vec3& b, const Vec3& c);
 
-// True when the functions above answer the triangle by its three segments: sin^2 of its
-// largest angle at most 1e-15 (a segment, a point, or a cap within about 2e-6 degree of 180),
-// or a coordinate that is not finite. Such a triangle has no reliable normal.
+// True when the triangle has no reliable normal in double precision: sin^2 of its largest
+// angle at most 1e-15 (a segment, a point, or a cap within about 2e-6 degree of 180), or a
+// coordinate that is not finite. (The functions above still answer such a cap exactly: its
+// plane from quadruple precision, its segments only when collinear to that precision.)
 bool isDegenerateTriangle(const Vec3& a, const Vec3& b, const Vec3& c);
 
 // Eight triangles stored structure-of-arrays for testing several at a time:

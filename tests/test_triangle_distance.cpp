@@ -738,6 +738,114 @@ TEST_CASE("closest point: needles", "[triangle_distance]") {
   }
 }
 
+// Slivers and caps (largest angle near 180 degrees) get their plane from quadruple precision:
+// a point on a cap 1e-8 high was answered 3.7e-9 away (the segments, half its height), which
+// also put a certified Hausdorff interval above the true value (found by review). Random caps
+// and slivers of heights 1e-2 .. 1e-17 of their length, and needles lying along their long
+// edges, at every orientation; points on them, just off them and beyond their edges, against
+// the quadruple-precision reference: the distance to 1e-12 relative plus 4 eps of the
+// coordinates, the result consistent, the block equal to the scalar function.
+TEST_CASE("closest point: slivers and caps in quadruple precision", "[triangle_distance]") {
+  const auto within = [](const TriangleClosest& r, const Vec3& p, const Vec3& a, const Vec3& b, const Vec3& c) {
+    const double reference = std::sqrt(referenceSquared(p, a, b, c));
+    return std::abs(std::sqrt(r.squared_distance) - reference) <= 1e-12 * reference + 4 * kEps * maxAbs(p, a, b, c);
+  };
+  {  // the review's cap and point (distance 1.2765e-17, exact rational arithmetic)
+    const Vec3 a(0, 0, 0), b(-0.076712757796519204, 0.40579110923776673, 0.91074075809465993),
+        c(-0.031772925221473985, 0.16807071695731035, 0.37721094628955709);
+    const Vec3 p(-0.032372725090242499, 0.17124352226620193, 0.3843318639022969);
+    const TriangleClosest r = closestPointOnTriangle(p, a, b, c);
+    INFO("got " << std::sqrt(r.squared_distance));
+    CHECK(std::sqrt(r.squared_distance) < 1e-15);
+    CHECK(r.feature == Feature::kFace);
+    CHECK_CONSISTENT(r, p, a, b, c, "review's cap");
+  }
+  std::mt19937_64 rng(0x51175);
+  std::uniform_real_distribution<double> u(0, 1);
+  int failures = 0, cases = 0;
+  for (int i = 0; i < 6000; ++i) {
+    const Eigen::Matrix3d rotation = randomRotation(rng);
+    const Vec3 shift = i % 3 == 0 ? Vec3::Zero() : randomVector(rng, std::pow(10.0, 3 * u(rng)));
+    const double length = std::pow(10.0, -2 + 4 * u(rng));
+    const double height = length * std::pow(10.0, -2 - 15 * u(rng));
+    // A cap (apex over the long edge's inside), a sliver (apex past its end) or a needle whose
+    // short edge lies along the long ones (apex just past the end, further along).
+    const int kind = i % 3;
+    const double x = kind == 0 ? u(rng) : (kind == 1 ? 1 + 0.5 * u(rng) : 1 + 1e-3 * u(rng));
+    const Vec3 local[3] = {Vec3(0, 0, 0), Vec3(length, 0, 0), Vec3(x * length, height, 0)};
+    Vec3 corners[3];
+    for (int k = 0; k < 3; ++k) corners[k] = rotation * local[k] + shift;
+    const int first = i % 7 % 3;
+    const Vec3 &a = corners[first], &b = corners[(first + 1) % 3], &c = corners[(first + 2) % 3];
+    TriangleBlock8 block;
+    for (int lane = 0; lane < 8; ++lane) setLane(block, lane, a, b, c);
+    for (int j = 0; j < 4; ++j) {
+      // On the triangle (random coordinates), off it along the normal, or beyond an edge.
+      const double w1 = u(rng), w2 = u(rng) * (1 - w1);
+      Vec3 on = a + w1 * (b - a) + w2 * (c - a);
+      if (j == 3) on = a + (1 + 1e-6 * u(rng)) * (b - a);
+      const double off = j == 0 ? 0.0 : length * std::pow(10.0, -15 + 13 * u(rng)) * (u(rng) < 0.5 ? -1 : 1);
+      const Vec3 p = on + off * (rotation * Vec3(0, 0, 1));
+      const TriangleClosest r = closestPointOnTriangle(p, a, b, c);
+      const bool ok = within(r, p, a, b, c);
+      failures += !ok;
+      ++cases;
+      if (!ok && failures <= 3) {
+        INFO("kind " << kind << " height " << height / length << " " << describe(p, a, b, c) << " got "
+                     << std::sqrt(r.squared_distance) << " reference " << std::sqrt(referenceSquared(p, a, b, c)));
+        CHECK(ok);
+      }
+      CHECK_CONSISTENT(r, p, a, b, c, "kind " << kind << " height " << height / length);
+      double out[8];
+      squaredDistancesToBlock(p, block, out);
+      CHECK(out[0] == r.squared_distance);
+    }
+  }
+  CHECK(cases == 24000);
+  CHECK(failures == 0);
+}
+
+// A point just beyond a needle's tip lies near the lines of both long edges, where the double
+// edge functions cannot tell inside from outside: quadruple precision decides (found by
+// review: 1.4e-13 beyond the apex of a needle of angle 6.3e-5 was answered 6.3e-14 away, on
+// the face, 1.3e-13 off the triangle).
+TEST_CASE("closest point: beyond a needle's tip", "[triangle_distance]") {
+  {
+    const Vec3 a(0, 0, 0.5), b(-0.70701791794492674, -0.70719563326198565, 0),
+        c(-0.70697348213723654, -0.70724005511194743, 0);
+    const Vec3 p(1e-13, 1e-13, 0.5);
+    const TriangleClosest r = closestPointOnTriangle(p, a, b, c);
+    CHECK(r.squared_distance == (p - a).squaredNorm());
+    CHECK(r.feature == Feature::kVertex0);
+    CHECK(r.point == a);
+  }
+  std::mt19937_64 rng(0x71b);
+  std::uniform_real_distribution<double> u(0, 1);
+  int failures = 0;
+  for (int i = 0; i < 4000; ++i) {
+    const Eigen::Matrix3d rotation = randomRotation(rng);
+    const double length = std::pow(10.0, -1 + 2 * u(rng));
+    const double angle = std::pow(10.0, -8 + 6 * u(rng));
+    const Vec3 tip = randomVector(rng, 1.0);
+    const Vec3 b = tip + rotation * Vec3(length, -0.5 * angle * length, 0);
+    const Vec3 c = tip + rotation * Vec3(length, 0.5 * angle * length, 0);
+    // Beyond the tip along the axis, a little to the side, a little off the plane.
+    const double back = length * std::pow(10.0, -14 + 6 * u(rng));
+    const Vec3 p = tip + rotation * Vec3(-back, back * angle * (u(rng) - 0.5), back * (u(rng) - 0.5));
+    const TriangleClosest r = closestPointOnTriangle(p, tip, b, c);
+    const double reference = std::sqrt(referenceSquared(p, tip, b, c));
+    const bool ok = std::abs(std::sqrt(r.squared_distance) - reference) <=
+                    1e-12 * reference + 4 * kEps * maxAbs(p, tip, b, c);
+    failures += !ok;
+    if (!ok && failures <= 3) {
+      INFO(describe(p, tip, b, c) << " got " << std::sqrt(r.squared_distance) << " reference " << reference);
+      CHECK(ok);
+    }
+    CHECK_CONSISTENT(r, p, tip, b, c, "needle tip");
+  }
+  CHECK(failures == 0);
+}
+
 // A needle's face point comes with barycentric coordinates that rebuild it (found by review:
 // its edge functions cross the short edge, and b0 came out 2e-5 off on a needle whose short
 // edge is 1e-12 of its long ones).
