@@ -594,7 +594,7 @@ struct DistanceService::Impl {
   // at q (a hit no farther is on the surface).
   // `signed_hit` false: the caller sets the sign (signLikeClosest), so the pseudonormal is only
   // needed for the direction on the surface.
-  DistanceHit makeHit(uint32_t slot, const Vec3& q, TriangleIndex face, Feature feature, const Vec3& c,
+  DistanceHit makeHit(uint32_t slot, const Vec3& p, const Vec3& q, TriangleIndex face, Feature feature, const Vec3& c,
                       const Vec3& barycentric, double distance, double touch, bool signed_hit = true) const {
     const Body& b = bodies[slot];
     const BodyShape& shape = *b.shape;
@@ -623,10 +623,15 @@ struct DistanceService::Impl {
       const double n = normal.norm();
       if (n > 0) direction = normal / n;
     }
+    // A point outside the body's box (by more than the surface's rounding) is outside the
+    // solid, whatever face it reached: far away (1e16 times the body's size) the distances of
+    // opposite faces tie in doubles, and the pseudonormal of the far side said inside (found by
+    // review).
+    const bool outside_box = squaredBoxDistance(b.box, p) > touch * touch;
     if (!hit.closed_body)
       hit.sign = HitSign::kUnsigned;
     else
-      hit.sign = !on_surface && offset.dot(normal) < 0 ? HitSign::kInside : HitSign::kOutside;
+      hit.sign = !on_surface && !outside_box && offset.dot(normal) < 0 ? HitSign::kInside : HitSign::kOutside;
     hit.signed_distance = hit.sign == HitSign::kInside ? -distance : distance;
     if (const Eigen::Isometry3d* pose = b.pose()) {
       hit.point = *pose * c;
@@ -804,7 +809,7 @@ struct DistanceService::Impl {
       const BestHit& hit = s.best[j];
       if (hit.c.triangle == kInvalidIndex) continue;  // set only for a hit within d
       const size_t i = first + j;
-      out.hits_[i] = makeHit(hit.slot, hit.q, hit.c.triangle, hit.c.feature, hit.c.point, hit.c.barycentric,
+      out.hits_[i] = makeHit(hit.slot, points.row(i).transpose(), hit.q, hit.c.triangle, hit.c.feature, hit.c.point, hit.c.barycentric,
                              hit.c.distance, hit.touch);
       out.count_[i] = 1;
       ++stats.hits;
@@ -850,7 +855,7 @@ struct DistanceService::Impl {
         if (s.triangle_hits.empty()) continue;
         // The first, closest hit gives every hit of this body its sign (signLikeClosest).
         for (const TriangleHit& t : s.triangle_hits)
-          hits.push_back(makeHit(slot, q, t.triangle, t.feature, t.point, t.barycentric, t.distance, touch,
+          hits.push_back(makeHit(slot, p, q, t.triangle, t.feature, t.point, t.barycentric, t.distance, touch,
                                  hits.size() == from));
         signLikeClosest(hits.data() + from, hits.data() + hits.size());
         // Each body's hits come sorted (by distance, then triangle): merge the runs.

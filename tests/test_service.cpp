@@ -1758,3 +1758,41 @@ TEST_CASE("framed bodies: positions that throw change nothing; a body framed far
     checkNearSurface(service, b);
   }
 }
+
+// Found by review: a point 1e16 times a closed body's size away was answered inside. The
+// distances of opposite faces tie in doubles there, and the tie went to the far side's face,
+// whose pseudonormal said inside. A point outside the body's box is outside the solid.
+TEST_CASE("points far from a closed body are outside", "[service][sign]") {
+  Mesh cube;  // [-0.5, 0.5]^3, faces outward
+  for (int i = 0; i < 8; ++i) cube.positions.push_back(Vec3(i & 1 ? 0.5 : -0.5, i & 2 ? 0.5 : -0.5, i & 4 ? 0.5 : -0.5));
+  cube.triangles = {{0, 2, 1}, {1, 2, 3}, {4, 5, 6}, {5, 7, 6}, {0, 1, 4}, {1, 5, 4},
+                    {2, 6, 3}, {3, 6, 7}, {0, 4, 2}, {2, 4, 6}, {1, 3, 5}, {3, 7, 5}};
+  int checked = 0;
+  for (const double size : {1.0, 1e-9}) {
+    Mesh scaled = cube;
+    for (Vec3& x : scaled.positions) x *= size;
+    for (int kind = 0; kind < 3; ++kind) {
+      INFO("size " << size << " kind " << kind);
+      DistanceService service;
+      const auto h = service.hierarchyFor(scaled);
+      if (kind == 0) service.addRigid(h);
+      else if (kind == 1) service.addDeforming(h, 0.0);
+      else service.addKeyframed(h, {scaled.positions}, 0.0);
+      std::vector<Vec3> points;
+      for (const double d : {1e3, 1e10, 1e15, 1e16, 1e20, 1e100})
+        for (const Vec3& dir : {Vec3(0.1, 0.2, 1), Vec3(-1, 0.3, 0.1), Vec3(0.2, -1, -0.4)}) points.push_back(d * size * dir);
+      points.push_back(Vec3(0.1, 0.2, 0.3) * size);  // inside
+      for (const QueryMode mode : {QueryMode::kClosest, QueryMode::kWithin}) {
+        const StepResult r = service.step(toMatrix(points), kInf, mode);
+        for (size_t i = 0; i < points.size(); ++i) {
+          INFO("point " << points[i].transpose() << " mode " << int(mode));
+          REQUIRE_FALSE(r.hits(i).empty());
+          CHECK(r.hits(i)[0].sign == (i + 1 == points.size() ? HitSign::kInside : HitSign::kOutside));
+          CHECK(r.hits(i)[0].signed_distance == (i + 1 == points.size() ? -1.0 : 1.0) * r.hits(i)[0].distance);
+          ++checked;
+        }
+      }
+    }
+  }
+  CHECK(checked == 2 * 3 * 2 * 19);
+}
