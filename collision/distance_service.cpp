@@ -341,6 +341,17 @@ struct DistanceService::Impl {
       }
       return plan;
     }
+    // A frame serves while the positions' coordinates in it stay within the same reach of the
+    // world's scale: a body carried far, then brought back (or torn back, part of it first)
+    // would otherwise keep the far frame, and its distance's rounding, at the origin (found by
+    // review: 1.6e-10 errors near the origin after a trip to 1e6).
+    const double scale = std::max(world, (shape.restUpper() - shape.restLower()).norm());
+    const auto serves = [&](const std::vector<Vec3>& in_frame) {
+      double reach = 0;
+      for (size_t i = 0; i < std::min(n, kFitSample); ++i)
+        reach = std::max(reach, in_frame[sampled(i, n)].cwiseAbs().maxCoeff());
+      return reach <= kFrameReach * scale;
+    };
     const std::vector<Vec3>& last_world = b.framed ? b.world_positions : last;  // as given last
     constexpr double kGain2 = 0.75 * 0.75;  // a quarter less motion, squared
     MotionFit step;
@@ -368,7 +379,7 @@ struct DistanceService::Impl {
     }
     if (moving) {
       const Eigen::Isometry3d frame = orthonormal(step.motion() * b.frame);
-      if (frame.matrix().allFinite() && toFrame(frame.inverse(Eigen::Isometry), positions, local)) {
+      if (frame.matrix().allFinite() && toFrame(frame.inverse(Eigen::Isometry), positions, local) && serves(local)) {
         double moved2 = 0;
         for (size_t v = 0; v < n; ++v) moved2 = std::max(moved2, (local[v] - last[v]).squaredNorm());
         if (moved2 < kGain2 * step.moved2) {
@@ -378,7 +389,14 @@ struct DistanceService::Impl {
         }
       }
     }
-    if (b.framed && toFrame(b.frame_inverse, positions, local)) plan.framed = true;  // the body's frame
+    if (b.framed && toFrame(b.frame_inverse, positions, local)) {
+      if (serves(local)) {
+        plan.framed = true;  // the body's frame
+      } else {  // back to world coordinates
+        plan.first = true;
+        plan.frame = Eigen::Isometry3d::Identity();
+      }
+    }
     return plan;
   }
   // local = inverse * positions; false (local unspecified) when a position is not finite or

@@ -1796,3 +1796,42 @@ TEST_CASE("points far from a closed body are outside", "[service][sign]") {
   }
   CHECK(checked == 2 * 3 * 2 * 19);
 }
+
+// Found by review: a deforming body carried to 1e6, torn back (a third of its vertices home
+// first, as in a blow-up or a reset) and then brought home kept its far frame, so its answers
+// at the origin carried 1e6's rounding (1.6e-10). A frame is kept only while the positions'
+// coordinates in it stay within reach of the world's scale.
+TEST_CASE("a deforming body brought back from far away leaves its far frame", "[service][frames]") {
+  const Mesh mesh = scenes::icosphere(2);
+  DistanceService service;
+  const BodyHandle body = service.addDeforming(service.hierarchyFor(mesh), 0.05);
+  const auto placed = [&](const Vec3& at) {
+    std::vector<Vec3> positions = mesh.positions;
+    for (Vec3& x : positions) x += at;
+    return positions;
+  };
+  const Vec3 home(0.3, -0.2, 0.1), far(1e6, -7e5, 3e5);
+  service.setPositions(body, placed(home));
+  service.setPositions(body, placed(far));
+  CHECK(service.frame(body).translation().norm() > 1e5);  // followed there
+  std::vector<Vec3> torn = placed(far);
+  const std::vector<Vec3> at_home = placed(home);
+  for (size_t i = 0; i < torn.size(); i += 3) torn[i] = at_home[i];
+  service.setPositions(body, torn);
+  Random random(5);
+  for (int step = 0; step < 3; ++step) {
+    service.setPositions(body, placed(home + Vec3(1e-3 * step, 0, 0)));
+    CHECK(service.frame(body).translation().norm() < 10);
+    Mesh now = mesh;
+    now.positions = service.positions(body);
+    std::vector<Vec3> points;
+    for (int i = 0; i < 100; ++i)
+      points.push_back(home + Vec3(random.uniform(-1.5, 1.5), random.uniform(-1.5, 1.5), random.uniform(-1.5, 1.5)));
+    const StepResult r = service.step(toMatrix(points), kInf, QueryMode::kClosest);
+    for (size_t i = 0; i < points.size(); ++i) {
+      const double expected = bruteForceClosest(now, points[i]).distance;
+      REQUIRE(r.closest(i));
+      CHECK(std::abs(r.closest(i)->distance - expected) <= 1e-12 * expected + 1e-14);
+    }
+  }
+}
