@@ -21,9 +21,13 @@ void RigidBody::setPose(const Eigen::Isometry3d& pose) {
   // rotation re-orthonormalised (through a normalised quaternion: pose() returns it), so that
   // answers stay exact for the pose the body has; beyond, the pose is refused.
   const Eigen::Matrix3d gram = r.transpose() * r;
-  if (!gram.isIdentity(1e-9) || std::abs(r.determinant() - 1) > 1e-9)
+  if (!gram.isIdentity(1e-9))
     throw std::invalid_argument(
         "RigidBody: the pose's rotation is not orthonormal to 1e-9 (a rigid pose has no scale or shear)");
+  if (std::abs(r.determinant() - 1) > 1e-9)
+    throw std::invalid_argument(
+        "RigidBody: the pose's rotation is a reflection (determinant -1): a rigid pose turns, it does not mirror "
+        "(mirror the mesh itself instead)");
   pose_ = pose;
   if (!gram.isIdentity(1e-15))
     pose_.linear() = Eigen::Quaterniond(r).normalized().toRotationMatrix();

@@ -787,6 +787,9 @@ TEST_CASE("rigid bodies: non-rigid poses throw", "[deform][rigid]") {
     CHECK_THROWS_AS(body.setPose(pose), std::invalid_argument);
     CHECK(body.pose().matrix() == good.matrix());  // a refused pose changes nothing
   }
+  // A mirror is orthonormal: the message says what it is (found by review).
+  CHECK_THROWS_WITH(RigidBody(h, mirror), Catch::Contains("reflection"));
+  CHECK_THROWS_WITH(RigidBody(h, scaled), Catch::Contains("not orthonormal"));
 }
 
 TEST_CASE("key frames: bounds proven and queries exact at every time", "[deform][keyframe]") {
