@@ -131,11 +131,27 @@ int runClosest(int argc, char** argv, int first) {
 
   // The hierarchy never has more triangles than the mesh: asking for more changes nothing.
   const size_t k_effective = static_cast<size_t>(std::min<uint64_t>(k, mesh.triangles.size()));
+  // Rows are written as they come, a batch at a time (--within or --k can give many rows per
+  // point: 200 points within 1e9 of the armadillo are 10 million rows, which a review ran out
+  // of memory holding); query_seconds counts the queries only.
+  constexpr size_t kBatchRows = 1 << 16;
   std::vector<Row> rows;
-  rows.reserve(mode == Mode::kClosest || mode == Mode::kAnytime ? points.size() : 0);
+  rows.reserve(kBatchRows);
+  size_t total_rows = 0;
+  double query_seconds = 0;
+  out.write("point,rank,distance,lower,upper,triangle,x,y,z,b0,b1,b2\n");
+  const auto writeRows = [&] {
+    for (const Row& r : rows) {
+      out.printf("%u,%u,%.17g,%.17g,%.17g,%u,%.17g,%.17g,%.17g,%.17g,%.17g,%.17g\n", r.point,
+                 r.rank, r.distance, r.lower, r.upper, r.triangle, r.position.x(), r.position.y(),
+                 r.position.z(), r.barycentric.x(), r.barycentric.y(), r.barycentric.z());
+    }
+    total_rows += rows.size();
+    rows.clear();
+  };
   std::vector<TriangleHit> hits;
   QueryStream stream(hierarchy);
-  const Timer query_timer;
+  Timer query_timer;
   for (uint32_t i = 0; i < points.size(); ++i) {
     const Vec3& p = points[i];
     switch (mode) {
@@ -159,15 +175,14 @@ int runClosest(int argc, char** argv, int first) {
           rows.push_back(rowFromHit(i, rank, hits[rank]));
         break;
     }
+    if (rows.size() >= kBatchRows) {
+      query_seconds += query_timer.seconds();
+      writeRows();
+      query_timer = Timer();
+    }
   }
-  const double query_seconds = query_timer.seconds();
-
-  out.write("point,rank,distance,lower,upper,triangle,x,y,z,b0,b1,b2\n");
-  for (const Row& r : rows) {
-    out.printf("%u,%u,%.17g,%.17g,%.17g,%u,%.17g,%.17g,%.17g,%.17g,%.17g,%.17g\n", r.point,
-               r.rank, r.distance, r.lower, r.upper, r.triangle, r.position.x(), r.position.y(),
-               r.position.z(), r.barycentric.x(), r.barycentric.y(), r.barycentric.z());
-  }
+  query_seconds += query_timer.seconds();
+  writeRows();
   out.close();
 
   std::string coherence;
@@ -181,7 +196,7 @@ int runClosest(int argc, char** argv, int first) {
                "\"rows\": %zu, \"build_seconds\": %.6f, \"query_seconds\": %.6f, "
                "\"mode\": \"%s\", \"path\": %s%s}\n",
                jsonString(mesh_path).c_str(), mesh.positions.size(), mesh.triangles.size(),
-               points.size(), rows.size(), build_seconds, query_seconds, modeName(mode),
+               points.size(), total_rows, build_seconds, query_seconds, modeName(mode),
                path ? "true" : "false", coherence.c_str());
   return kExitOk;
 }
