@@ -8,9 +8,11 @@ endif()
 install(TARGETS meshsweeper EXPORT meshsweeperTargets
   ARCHIVE DESTINATION ${CMAKE_INSTALL_LIBDIR}
   LIBRARY DESTINATION ${CMAKE_INSTALL_LIBDIR})
+# The OpenVDB cross-check (collision/vdb_check.h, library meshsweeper_vdb) serves the tests and
+# `meshsweep check`; it is not installed, nor its header.
 foreach(module core deform collision)
   install(DIRECTORY ${PROJECT_SOURCE_DIR}/${module}/ DESTINATION include/meshsweeper/${module}
-          FILES_MATCHING PATTERN "*.h")
+          FILES_MATCHING PATTERN "*.h" PATTERN "vdb_check.h" EXCLUDE)
 endforeach()
 install(EXPORT meshsweeperTargets NAMESPACE meshsweeper::
         DESTINATION ${CMAKE_INSTALL_LIBDIR}/cmake/meshsweeper)
