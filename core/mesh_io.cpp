@@ -450,10 +450,22 @@ std::string checkObjFaces(const std::string& text) {
 // triangulation, in that documented order. Otherwise the polygon is cut into ears in the plane
 // of its Newell normal, so a planar polygon is covered exactly (that fan would cover area
 // outside it). A polygon with no ear to cut (self-intersecting, far from planar) has no one
-// right answer: the rest is fanned; so is a non-convex one of more than kMaxEarCorners
-// corners (ear cutting is quadratic to cubic in the corners).
+// right answer: the rest is fanned. Ear cutting is quadratic to cubic in the corners, so it is
+// bounded twice: a non-convex polygon of more than kMaxEarCorners corners is fanned whole, and
+// the whole file's ear cutting spends at most `ear_work_left` corner tests (EarWork): the
+// polygon during which it runs out, and every non-convex polygon after it, are fanned whole
+// (found by review: 12 stars of 8192 corners took a minute).
 constexpr std::size_t kMaxEarCorners = 8192;
-void triangulatePolygon(const std::vector<Vec3>& x, std::vector<VertexIndex>& ring, std::vector<Triangle>& out) {
+
+// The ear-cutting budget of one file, in corner tests (one candidate ear looked at, or one
+// corner tested against it): kEarWorkBase + kEarWorkPerCorner * (corners of all its faces).
+// An ordinary non-convex polygon of k corners takes about k * k / 2; a corner test takes a few
+// nanoseconds, so the base is well under a second.
+constexpr std::uint64_t kEarWorkBase = std::uint64_t(1) << 26;
+constexpr std::uint64_t kEarWorkPerCorner = 256;
+
+void triangulatePolygon(const std::vector<Vec3>& x, std::vector<VertexIndex>& ring, std::vector<Triangle>& out,
+                        std::uint64_t& ear_work_left) {
   const std::size_t k = ring.size();
   auto fan = [&] {
     for (std::size_t j = 1; j + 1 < ring.size(); ++j) out.push_back({ring[0], ring[j], ring[j + 1]});
@@ -467,7 +479,7 @@ void triangulatePolygon(const std::vector<Vec3>& x, std::vector<VertexIndex>& ri
   // whole polygon: convex ones, and many others).
   bool fan_ok = true;
   for (std::size_t j = 1; j + 1 < k && fan_ok; ++j) fan_ok = !(turn(ring[0], ring[j], ring[j + 1]) < 0);
-  if (fan_ok || !(normal.squaredNorm() > 0) || k > kMaxEarCorners) return fan();
+  if (fan_ok || !(normal.squaredNorm() > 0) || k > kMaxEarCorners || ear_work_left == 0) return fan();
   auto inside = [&](VertexIndex q, VertexIndex a, VertexIndex b, VertexIndex c) {  // closed triangle, along the normal
     return turn(a, b, q) >= 0 && turn(b, c, q) >= 0 && turn(c, a, q) >= 0;
   };
@@ -475,6 +487,9 @@ void triangulatePolygon(const std::vector<Vec3>& x, std::vector<VertexIndex>& ri
   auto elsewhere = [&](VertexIndex q, VertexIndex a, VertexIndex b, VertexIndex c) {
     return x[q] != x[a] && x[q] != x[b] && x[q] != x[c];
   };
+  // Kept to fan the polygon whole if the budget runs out.
+  const std::vector<VertexIndex> corners = ring;
+  const std::size_t first_triangle = out.size();
   std::size_t from = 0;  // the search resumes next to the last ear: near-quadratic in all
   while (ring.size() > 3) {
     const std::size_t n = ring.size();
@@ -482,12 +497,19 @@ void triangulatePolygon(const std::vector<Vec3>& x, std::vector<VertexIndex>& ri
     for (std::size_t step = 0; step < n && !cut; ++step) {
       const std::size_t i = (from + step) % n;
       const VertexIndex a = ring[(i + n - 1) % n], b = ring[i], c = ring[(i + 1) % n];
-      if (!(turn(a, b, c) > 0)) continue;  // reflex or flat: not an ear
-      bool empty = true;
-      for (std::size_t j = 0; j < n && empty; ++j) {
+      std::uint64_t work = 1;
+      bool empty = turn(a, b, c) > 0;  // reflex or flat: not an ear
+      for (std::size_t j = 0; j < n && empty; ++j, ++work) {
         const VertexIndex q = ring[j];
         if (elsewhere(q, a, b, c)) empty = !inside(q, a, b, c);
       }
+      if (work >= ear_work_left) {
+        ear_work_left = 0;
+        out.resize(first_triangle);
+        ring = corners;
+        return fan();
+      }
+      ear_work_left -= work;
       if (!empty) continue;
       out.push_back({a, b, c});
       ring.erase(ring.begin() + static_cast<std::ptrdiff_t>(i));
@@ -1249,10 +1271,12 @@ Mesh readMesh(const std::string& path) {
   }
   if (triangle_count == 0) fail(path, "the file has no faces");
   mesh.triangles.reserve(triangle_count);
+  // triangle_count + 2 * faces corners in all.
+  std::uint64_t ear_work_left = kEarWorkBase + kEarWorkPerCorner * (triangle_count + 2 * polygons.size());
   std::vector<VertexIndex> ring;
   for (const Corners& corners : polygons) {
     ring.assign(corners.begin(), corners.end());
-    triangulatePolygon(mesh.positions, ring, mesh.triangles);
+    triangulatePolygon(mesh.positions, ring, mesh.triangles, ear_work_left);
   }
   const std::string problem = checkMesh(mesh);
   if (!problem.empty()) throw MeshError(problem);

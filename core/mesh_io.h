@@ -15,7 +15,7 @@ namespace meshsweeper {
 // Vertex order and face order are the file's; polygons are fan-triangulated in face order
 // (face f with corners c0..ck gives (c0,c1,c2), (c0,c2,c3), ...), so a result's triangle index
 // indexes that triangle list (a polygon that its first corner does not see whole is cut into
-// ears instead; README "Mesh input"). Exception: STL stores three corners per triangle and no
+// ears instead, within a work budget per file; README "Mesh input"). Exception: STL stores three corners per triangle and no
 // vertices; corners with exactly equal coordinates are merged into one vertex, numbered in order
 // of first appearance, so an STL mesh has shared vertices and triangle t is the file's triangle
 // t. Degenerate triangles, duplicate and isolated vertices are kept; OBJ 'l' (line) elements are

@@ -326,6 +326,47 @@ TEST_CASE("polygons: the fan where it is right, ears where it is not", "[mesh_io
   CHECK(covered(star_mesh) == Approx(star_area).epsilon(1e-12));
 }
 
+TEST_CASE("polygons: ear cutting has a budget per file, past it non-convex polygons are fanned", "[mesh_io]") {
+  // Found by review: one non-convex face of 8192 corners repeated 12 times took a minute to
+  // read (ear cutting was capped per polygon only). The budget (README "Mesh input") is
+  // 2^26 + 256 corner tests per corner of the file; cutting this star (radii 0.5 and 1 in turn,
+  // from a reflex corner) takes about 3.7e7 of them, so of 4 copies (7.6e7) 2 are cut into ears,
+  // the copy during which the budget runs out and the one after it are fanned whole.
+  TempDir dir;
+  constexpr int kCorners = 8192, kCopies = 4;
+  std::string off = "OFF\n" + std::to_string(kCorners) + " " + std::to_string(kCopies) + " 0\n";
+  for (int i = 0; i < kCorners; ++i) {
+    const double angle = 2 * M_PI * i / kCorners, radius = i % 2 ? 1.0 : 0.5;
+    off += std::to_string(radius * std::cos(angle)) + " " + std::to_string(radius * std::sin(angle)) + " 0\n";
+  }
+  std::string face = std::to_string(kCorners);
+  for (int i = 0; i < kCorners; ++i) face += " " + std::to_string(i);
+  for (int copy = 0; copy < kCopies; ++copy) off += face + "\n";
+  const Mesh mesh = meshsweeper::readMesh(dir.write("stars.off", off));
+  constexpr std::size_t kPerCopy = kCorners - 2;
+  REQUIRE(mesh.triangles.size() == kCopies * kPerCopy);
+  auto is_fan = [&](int copy) {
+    for (std::size_t j = 0; j < kPerCopy; ++j) {
+      const Triangle expected = {0, static_cast<meshsweeper::VertexIndex>(j + 1), static_cast<meshsweeper::VertexIndex>(j + 2)};
+      if (mesh.triangles[copy * kPerCopy + j] != expected) return false;
+    }
+    return true;
+  };
+  // Ears: every triangle turns the polygon's way (+z), none of the fan's inverted ones.
+  auto is_ears = [&](int copy) {
+    for (std::size_t j = 0; j < kPerCopy; ++j) {
+      const Triangle& t = mesh.triangles[copy * kPerCopy + j];
+      if ((mesh.positions[t[1]] - mesh.positions[t[0]]).cross(mesh.positions[t[2]] - mesh.positions[t[0]]).z() <= 0)
+        return false;
+    }
+    return true;
+  };
+  CHECK(is_ears(0));
+  CHECK(is_ears(1));
+  CHECK(is_fan(2));
+  CHECK(is_fan(3));
+}
+
 TEST_CASE("binary PLY, little and big endian, float and double coordinates", "[mesh_io]") {
   TempDir dir;
   for (const bool big : {false, true}) {
