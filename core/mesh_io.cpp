@@ -13,7 +13,8 @@
 //        dereference a null pointer; an unknown type makes it misread the rest of the file).
 //   STL  A binary file is read here (its triangle count must match the file size, its
 //        coordinates be finite); an ASCII file's structure is checked word by word before CGAL
-//        reads it (checkStl).
+//        reads it (checkStl), and CGAL is given its text up to the last 'endsolid' line, names
+//        blanked (checkAsciiStl).
 //   OBJ  Nothing to check ahead: CGAL grows its arrays while it reads.
 // CGAL's readers only say true or false; when they say false for an OFF or OBJ file, the file is
 // scanned again here to name the line and the problem.
@@ -911,18 +912,31 @@ std::uint32_t littleEndian32(const unsigned char* bytes) {
 
 // An ASCII STL's words in order: 'solid' [name], then per facet 'facet' ['normal' x y z]
 // 'outer' 'loop' 3 x ('vertex' x y z) 'endloop' 'endfacet', then 'endsolid' [name]; several
-// solids may follow one another. CGAL's parser skips what it does not expect, and when it fails
-// it retries the file as binary, which for a file under 80 bytes succeeds with the facets read
-// so far: a malformed facet must be caught here. Returns the first problem, or "".
-std::string checkAsciiStl(std::istream& in) {
-  std::string line;
+// solids may follow one another; after an 'endsolid', a first word that is not 'solid' ends the
+// data. CGAL's parser skips what it does not expect, and when it fails it retries the file as
+// binary, which for a file under 80 bytes succeeds with the facets read so far: a malformed
+// facet must be caught here. Returns the first problem, or "" and `text` made what CGAL is to
+// read (found by review): cut after the line of the last 'endsolid' (CGAL read a facet after
+// it), and each name, the rest of a 'solid' or 'endsolid' line, made blanks (CGAL reads every
+// word: a name 'solid' or 'facet' was read as a keyword, and a tab after the first 'solid' made
+// it try the file as binary first).
+std::string checkAsciiStl(std::string& text) {
   std::uint64_t line_number = 0, facets = 0, solids = 0;
   bool in_solid = false, in_facet = false, in_loop = false;
   int vertices = 0;
-  while (std::getline(in, line)) {
+  std::size_t data_end = 0;  // after the line of the last 'endsolid'
+  bool ended = false;        // a word after an 'endsolid' ended the data
+  for (std::size_t line_begin = 0; line_begin < text.size() && !ended;) {
+    const std::size_t line_end = std::min(text.find('\n', line_begin), text.size());
+    const std::string_view line(text.data() + line_begin, line_end - line_begin);
+    const std::size_t next_line = std::min(line_end + 1, text.size());
     ++line_number;
     const auto words = splitWords(line);
     const std::string at = "line " + std::to_string(line_number) + ": ";
+    // The rest of the line after word w is a name: blanks for CGAL.
+    auto blankName = [&](std::string_view w) {
+      std::fill(text.begin() + (w.data() + w.size() - text.data()), text.begin() + line_end, ' ');
+    };
     for (std::size_t k = 0; k < words.size(); ++k) {
       const std::string_view w = words[k];
       auto numbers = [&](const char* what) -> std::string {
@@ -936,17 +950,24 @@ std::string checkAsciiStl(std::istream& in) {
         return {};
       };
       if (!in_solid) {
-        // After an 'endsolid', what is not another solid is ignored, as CGAL does (a DOS
-        // end-of-file byte, padding, a trailing line).
-        if (w != "solid") return facets > 0 || solids > 0 ? std::string() : at + "expected 'solid', found " + shown(w);
+        // After an 'endsolid', what is not another solid is ignored (a DOS end-of-file byte,
+        // padding, a trailing line, a stray facet).
+        if (w != "solid") {
+          if (facets == 0 && solids == 0) return at + "expected 'solid', found " + shown(w);
+          ended = true;
+          break;
+        }
         in_solid = true;
-        break;  // the rest of the line is the solid's name
+        blankName(w);
+        break;
       }
       if (w == "endsolid") {
         if (in_facet) return at + "'endsolid' inside facet " + std::to_string(facets - 1);
         in_solid = false;
         ++solids;
-        break;  // the rest of the line is the name
+        blankName(w);
+        data_end = next_line;
+        break;
       }
       if (w == "facet") {
         if (in_facet) return at + "facet " + std::to_string(facets - 1) + " has no 'endfacet'";
@@ -979,15 +1000,17 @@ std::string checkAsciiStl(std::istream& in) {
         return at + "unexpected " + shown(w) + " in facet " + std::to_string(facets - 1);
       }
     }
+    line_begin = next_line;
   }
   if (in_facet || in_solid) return "the ASCII STL ends inside " + std::string(in_facet ? "a facet" : "its solid") +
                                    " (no 'endsolid': truncated file?)";
+  text.resize(data_end);
   return {};
 }
 
-// How an STL file's first bytes (header and triangle count) read, as CGAL decides: ASCII first
-// when, after whitespace (from byte `from`), "solid" and a space or line end start it; as
-// binary, the count and the size it needs.
+// How an STL file's first bytes (header and triangle count) read: ASCII first when, after
+// whitespace (from byte `from`), "solid" and a blank or line end start it; as binary, the count
+// and the size it needs.
 constexpr std::uint64_t kStlHeaderBytes = 84, kStlTriangleBytes = 50;
 struct StlStart {
   bool solid = false;
@@ -1000,8 +1023,10 @@ StlStart readStlStart(const unsigned char* bytes, std::uint64_t got, std::uint64
   got = std::min(got, kStlHeaderBytes);
   std::uint64_t first = from;
   while (first < got && std::isspace(bytes[first])) ++first;
+  // CGAL wants a space or a line end after 'solid'; any blank is taken here (found by review: a
+  // tab made a valid ASCII file a truncated binary one), and checkAsciiStl makes it a space.
   out.solid = got >= first + 6 && std::memcmp(bytes + first, "solid", 5) == 0 &&
-              (bytes[first + 5] == ' ' || bytes[first + 5] == '\n' || bytes[first + 5] == '\r');
+              (bytes[first + 5] == '\n' || isBlank(static_cast<char>(bytes[first + 5])));
   out.triangles = got == kStlHeaderBytes ? littleEndian32(bytes + 80) : 0;
   out.needed = kStlHeaderBytes + kStlTriangleBytes * out.triangles;
   out.binary_size = got == kStlHeaderBytes && out.needed == file_size;
@@ -1013,9 +1038,10 @@ StlStart readStlStart(const unsigned char* bytes, std::uint64_t got, std::uint64
 // be finite (CGAL merges equal points through a std::map, where NaN compares equal to
 // anything); CGAL tries ASCII first when the 80-byte header starts with "solid ", and kept
 // facets spelled out in such a header before the file's own. Equal corners are merged into one
-// vertex, numbered in order of first use, as CGAL does. Returns true when it read the file.
+// vertex, numbered in order of first use, as CGAL does. Returns true when it read the file;
+// false for an ASCII file, then in `ascii_text` as CGAL is to read it (checkAsciiStl).
 bool checkStl(const std::string& path, std::istream& in, std::uint64_t file_size,
-              std::vector<CgalPoint>& points, std::vector<Corners>& polygons) {
+              std::vector<CgalPoint>& points, std::vector<Corners>& polygons, std::string& ascii_text) {
   unsigned char header[kStlHeaderBytes] = {};
   in.read(reinterpret_cast<char*>(header), kStlHeaderBytes);
   const std::uint64_t got = static_cast<std::uint64_t>(in.gcount());
@@ -1026,7 +1052,9 @@ bool checkStl(const std::string& path, std::istream& in, std::uint64_t file_size
     // ASCII: CGAL grows its arrays while it reads; the structure is checked here.
     in.clear();
     in.seekg(0);
-    const std::string problem = checkAsciiStl(in);
+    ascii_text.assign(std::istreambuf_iterator<char>(in), {});
+    if (in.bad()) fail(path, "read error");
+    const std::string problem = checkAsciiStl(ascii_text);
     if (!problem.empty()) {
       // A binary file whose header starts with "solid " and whose size does not match its
       // count is taken for ASCII: say what it would be as binary too.
@@ -1167,10 +1195,13 @@ Mesh readMesh(const std::string& path) {
   }
   std::vector<CgalPoint> points;
   std::vector<Corners> polygons;
-  const bool read_here = format == Format::kStl && checkStl(path, in, file_size, points, polygons);
-  // OBJ goes to CGAL from memory, blanks made spaces (its reader splits corners on spaces only),
-  // after the strict check of its faces.
-  std::istringstream obj_text;
+  // OBJ and ASCII STL go to CGAL from memory, as checked and prepared here.
+  std::istringstream cgal_text;
+  std::string stl_text;
+  const bool read_here = format == Format::kStl && checkStl(path, in, file_size, points, polygons, stl_text);
+  if (format == Format::kStl && !read_here) cgal_text.str(std::move(stl_text));
+  // OBJ: blanks made spaces (CGAL's reader splits corners on spaces only), after the strict
+  // check of its faces.
   if (format == Format::kObj) {
     std::string text(std::istreambuf_iterator<char>(in), {});
     if (in.bad()) fail(path, "read error");
@@ -1216,9 +1247,10 @@ Mesh readMesh(const std::string& path) {
         if (in_suffix) text[i] = ' ';
       }
     });
-    obj_text.str(std::move(text));
+    cgal_text.str(std::move(text));
   }
-  std::istream& source = format == Format::kObj ? static_cast<std::istream&>(obj_text) : in;
+  const bool from_memory = format == Format::kObj || (format == Format::kStl && !read_here);
+  std::istream& source = from_memory ? static_cast<std::istream&>(cgal_text) : in;
   if (format == Format::kOff) {
     const std::string problem = checkOffBody(in, off_header);
     if (!problem.empty()) fail(path, problem);
@@ -1234,7 +1266,7 @@ Mesh readMesh(const std::string& path) {
       case Format::kOff: ok = CGAL::IO::read_OFF(in, points, polygons, quiet); break;
       case Format::kObj: ok = CGAL::IO::read_OBJ(source, points, polygons, quiet); break;
       case Format::kPly: ok = CGAL::IO::read_PLY(in, points, polygons, quiet); break;
-      case Format::kStl: ok = CGAL::IO::read_STL(in, points, polygons, quiet); break;
+      case Format::kStl: ok = CGAL::IO::read_STL(source, points, polygons, quiet); break;
     }
   } catch (const TooManyCorners& e) {
     fail(path, "a face declares " + std::to_string(e.count) + " corners (at most " +

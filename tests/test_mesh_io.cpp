@@ -413,13 +413,52 @@ TEST_CASE("ASCII STL: CGAL merges equal points, in order of first appearance", "
   CHECK(mesh.triangles == expected);
 }
 
+TEST_CASE("ASCII STL: what follows the last endsolid is ignored, names are not read", "[mesh_io]") {
+  TempDir dir;
+  const std::string facets = "facet normal 0 0 1\n outer loop\n  vertex 0 0 0\n  vertex 1 0 0\n  vertex 1 1 0\n"
+                             " endloop\nendfacet\n"
+                             "facet normal 0 0 1\n outer loop\n  vertex 0 0 0\n  vertex 1 1 0\n  vertex 0 1 0\n"
+                             " endloop\nendfacet\n";
+  const std::string square = "solid square\n" + facets + "endsolid square\n";
+  const std::string far_facet = "facet normal 0 0 1\nouter loop\nvertex 50 50 50\nvertex 51 50 50\nvertex 50 51 50\n"
+                                "endloop\nendfacet\n";
+  const std::string one_line_facet = "facet vertex 50 50 50 vertex 51 50 50 vertex 50 51 50 endfacet";
+  const std::vector<Triangle> expected = {{0, 1, 2}, {0, 2, 3}};
+  // Found by review: a whole facet after the last 'endsolid' was added to the mesh (a
+  // malformed one made the file refused), a tab after 'solid' made the file a truncated binary
+  // STL, and 'solid' or 'facet' as a solid's name confused CGAL's reader.
+  const std::pair<const char*, std::string> files[] = {
+      {"facet after endsolid", square + far_facet},
+      {"malformed facet after endsolid", square + "facet normal 0 0 0\nouter loop\nvertex 1 2 3\nendloop\nendfacet\n"},
+      {"a word, then a solid, after endsolid", square + "junk\nsolid b\n" + far_facet + "endsolid b\n"},
+      {"a facet on the endsolid line", "solid square\n" + facets + "endsolid square " + one_line_facet + "\n"},
+      {"tab after solid", "solid\tsquare\n" + facets + "endsolid\tsquare\n"},
+      {"tab after solid, no name", "solid\t\n" + facets + "endsolid\n"},
+      {"named solid", "solid solid\n" + facets + "endsolid solid\n"},
+      {"named facet", "solid facet\n" + facets + "endsolid facet\n"},
+      {"named endsolid", "solid endsolid\n" + facets + "endsolid endsolid\n"},
+      {"named with a facet", "solid a " + one_line_facet + "\n" + facets + "endsolid\n"}};
+  for (const auto& [what, text] : files) {
+    INFO(what);
+    const std::string path = dir.write("square.stl", text);
+    CHECK(readError(path) == "(no error)");
+    if (readError(path) != "(no error)") continue;
+    const Mesh mesh = meshsweeper::readMesh(path);
+    CHECK(mesh.positions == kSquare);
+    CHECK(mesh.triangles == expected);
+  }
+  // A second solid right after the first is read.
+  const Mesh two = meshsweeper::readMesh(dir.write("two.stl", square + "solid far\n" + far_facet + "endsolid far\n"));
+  CHECK(two.triangles.size() == 3);
+}
+
 TEST_CASE("binary STL, also with a header that starts with 'solid'", "[mesh_io]") {
   TempDir dir;
   const std::vector<std::array<Vec3, 3>> triangles = {{kSquare[0], kSquare[1], kSquare[2]},
                                                       {kSquare[0], kSquare[2], kSquare[3]}};
   // The last header spells out a facet (found by review: CGAL read it as ASCII first and kept
   // that facet before the file's own triangles).
-  for (const std::string header : {"binary written by the test", "solid but binary",
+  for (const std::string header : {"binary written by the test", "solid but binary", "solid\tbinary",
                                    "solid a facet vertex 5 5 5 vertex 6 5 5 vertex 5 6 5 endfacet"}) {
     INFO(header);
     const Mesh mesh = meshsweeper::readMesh(dir.write("square.stl", binaryStl(header, triangles, 2)));
