@@ -639,13 +639,21 @@ PlyHeader parsePlyHeader(const std::string& path, std::istream& in) {
   std::string line;
   std::uint64_t line_number = 0;
   bool ended = false;
+  std::uint64_t header_bytes = 0;  // read so far
   while (!ended && std::getline(in, line)) {
     ++line_number;
-    const std::streamoff position = in.tellg();
-    if (position < 0 || static_cast<std::uint64_t>(position) > kMaxPlyHeaderBytes)
+    const bool last_line = in.eof();  // no line break after it
+    header_bytes += line.size() + (last_line ? 0 : 1);
+    if (header_bytes > kMaxPlyHeaderBytes)
       fail(path, "no PLY end_header in the first " + std::to_string(kMaxPlyHeaderBytes) +
                      " bytes");
     const auto words = splitWords(line);
+    // A header cut inside a line (found by review: it was said to have no end_header in the
+    // first MiB).
+    const bool ply_line = line_number == 1 && words.size() == 1 && words[0] == "ply";
+    if (last_line && (line_number > 1 || ply_line) && !(words.size() == 1 && words[0] == "end_header"))
+      fail(path, "the PLY header has no end_header (the file ends inside header line " +
+                     std::to_string(line_number) + ": truncated file?)");
     const std::string at = "PLY header line " + std::to_string(line_number) + ": ";
     if (line_number == 1) {
       if (words.size() != 1 || words[0] != "ply") fail(path, "not a PLY file (no 'ply' line)");
@@ -698,8 +706,9 @@ PlyHeader parsePlyHeader(const std::string& path, std::istream& in) {
       fail(path, at + "unexpected " + shown(words[0]));
     }
   }
-  if (!ended) fail(path, line_number < 2 ? "not a PLY file" : "the PLY header has no end_header");
-  header.body_offset = static_cast<std::uint64_t>(in.tellg());
+  if (!ended)
+    fail(path, line_number < 2 ? "not a PLY file" : "the PLY header has no end_header (truncated file?)");
+  header.body_offset = header_bytes;
 
   // What CGAL's read_PLY interprets, and the types it assumes for it.
   bool has_vertices = false, has_faces = false;
@@ -1295,6 +1304,11 @@ Mesh readMesh(const std::string& path) {
       fail(path, "face " + std::to_string(f) + " has " + plural(corners.size(), "corner") +
                      " (at least 3 needed)");
     for (std::size_t v : corners) {
+      // CGAL's PLY reader makes a negative int index a size_t (found by review: -1 was
+      // reported as 18446744073709551615).
+      if (static_cast<std::int64_t>(v) < 0)
+        fail(path, "face " + std::to_string(f) + " uses the negative vertex index " +
+                       std::to_string(static_cast<std::int64_t>(v)));
       if (v >= points.size())
         fail(path, "face " + std::to_string(f) + " uses vertex " + std::to_string(v) +
                        " but the file has " + plural(points.size(), "vertex"));

@@ -624,7 +624,16 @@ TEST_CASE("readMesh refuses PLY headers it cannot read safely", "[mesh_io]") {
                                      "end_header\n" + body)),
              Contains("vertex_indices"));
   CHECK_THAT(readError(dir.write("noend.ply", start + xyz + faces)),
-             Contains("end_header"));
+             Contains("the PLY header has no end_header (truncated file?)"));
+  // Found by review: a header cut inside a line (no line break at its end) was said to have no
+  // end_header "in the first 1048576 bytes".
+  for (const std::string& cut : {std::string("ply\nformat binary_little_endian 1."), start + "property double x",
+                                start + "element verte"}) {
+    INFO(cut);
+    CHECK_THAT(readError(dir.write("cut.ply", cut)),
+               Contains("the PLY header has no end_header (the file ends inside header line") &&
+                   Contains("truncated file?)") && !Contains("1048576"));
+  }
   CHECK_THAT(readError(dir.write("nofaces.ply", start + xyz + "end_header\n0 0 0\n1 0 0\n0 1 0\n")),
              Contains("no faces"));
   CHECK_THAT(readError(dir.write("word.ply", start + xyz + faces + "end_header\n0 0 0\n1 x 0\n0 1 0\n3 0 1 2\n")),
@@ -849,8 +858,9 @@ TEST_CASE("readMesh refuses out-of-range indices and faces with fewer than 3 cor
                                 "0 0 0\n1 0 0\n0 1 0\n";
   CHECK_THAT(readError(dir.write("range.ply", ply_start + "3 0 1 3\n")),
              Contains("face 0 uses vertex 3 but the file has 3 vertices"));
+  // Found by review: a negative PLY index was reported as 18446744073709551615.
   CHECK_THAT(readError(dir.write("negative.ply", ply_start + "3 0 -1 2\n")),
-             Contains("face 0 uses vertex"));
+             Contains("face 0 uses the negative vertex index -1"));
   CHECK_THAT(readError(dir.write("two.off", "OFF\n3 2 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n2 0 1\n")),
              Contains("face 1 has 2 corners (at least 3 needed)"));
   CHECK_THAT(readError(dir.write("zero.off", "OFF\n3 2 0\n0 0 0.5\n1 0 0.5\n0 1 0.5\n3 0 1 2\n0\n")),
@@ -869,6 +879,10 @@ TEST_CASE("readMesh refuses out-of-range indices and faces with fewer than 3 cor
   for (std::uint32_t v : {0u, 1u, 2u}) putU32(binary, v);
   CHECK(meshsweeper::readMesh(dir.write("fine_binary.ply", binary)).triangles.size() == 1);
   CHECK(meshsweeper::readMesh(dir.write("newline_binary.ply", binary + "\n")).triangles.size() == 1);
+  std::string negative_binary = binary.substr(0, binary.size() - 4);
+  putU32(negative_binary, 0xfffffffeu);  // int -2
+  CHECK_THAT(readError(dir.write("negative_binary.ply", negative_binary)),
+             Contains("face 0 uses the negative vertex index -2"));
   putU32(binary, 7);
   CHECK_THAT(readError(dir.write("extra_binary.ply", binary)),
              Contains("4 bytes follow the last element the header declares"));
