@@ -12,7 +12,7 @@ namespace meshsweeper {
 
 struct Mesh {
   std::vector<Vec3> positions;       // [vertex]
-  std::vector<Triangle> triangles;   // [triangle] polygons fan-triangulated in face order
+  std::vector<Triangle> triangles;   // [triangle] polygons triangulated in face order
   std::string name;                  // file path or a procedural name, for messages
 };
 

@@ -22,8 +22,8 @@
 // Polygons are handed to CGAL as Corners, whose resize() refuses absurd corner counts (an OFF
 // face line "1000000000 0 1 2" would otherwise allocate 8 GB before the line is found short).
 // After CGAL: polygons with fewer than 3 corners and out-of-range indices are refused (CGAL's OBJ
-// reader lets index n+1 through), polygons are fan-triangulated, and checkMesh() has the last
-// word.
+// reader lets index n+1 through), polygons are triangulated (the fan, or ears where the fan
+// is wrong: triangulatePolygon), and checkMesh() has the last word.
 #include "core/mesh_io.h"
 
 #include <CGAL/IO/OBJ.h>

@@ -37,7 +37,9 @@ const char kClosestHelp[] =
     "  rank      0 for closest/anytime; 0,1,2,... by increasing distance for --k/--within\n"
     "  distance  distance to the mesh (the upper bound for --tolerance)\n"
     "  lower, upper  certified bounds; both equal distance when exact\n"
-    "  triangle  0-based triangle index: faces in file order, polygons fan-triangulated\n"
+    "  triangle  0-based triangle index: faces in file order, a polygon of k corners gives\n"
+    "            k - 2 triangles: its fan (c0,c1,c2), (c0,c2,c3), ... where c0 sees the whole\n"
+    "            polygon, else it is cut into ears (README \"Mesh input\")\n"
     "  x,y,z     the closest point; b0,b1,b2 its barycentric coordinates in that triangle\n"
     "Numbers are printed with 17 significant digits. A point with no triangle within D\n"
     "prints no row.\n"
@@ -69,7 +71,7 @@ struct Row {
   uint32_t point;  // [query point]
   uint32_t rank;
   double distance, lower, upper;
-  TriangleIndex triangle;  // [triangle] file order after fan triangulation
+  TriangleIndex triangle;  // [triangle] file order after triangulation (mesh_io.h)
   Vec3 position;
   Vec3 barycentric;
 };

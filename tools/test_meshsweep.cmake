@@ -148,6 +148,8 @@ check(within_none RC 0 ARGS closest quad.off points.txt --within 0 OUT "${header
 check(help RC 0 ARGS help OUT "closest" "sample")
 check(help_flag RC 0 ARGS --help OUT "Usage: meshsweep COMMAND")
 check(help_closest RC 0 ARGS help closest OUT "point,rank,distance,lower,upper,triangle")
+# Found by review: the help said polygons are fan-triangulated; non-convex ones are cut into ears.
+check(help_closest_polygons RC 0 ARGS help closest OUT "cut into ears" NOT_OUT "fan-triangulated")
 check(closest_help_flag RC 0 ARGS closest --help OUT "--tolerance")
 check(no_arguments RC 2 ERR "Usage: meshsweep COMMAND")
 
