@@ -1384,8 +1384,14 @@ std::vector<Vec3> readPoints(const std::string& path) {
   while (nextLine()) {
     const auto words = splitWords(line);
     const std::string at = name + ":" + std::to_string(line_number) + ": ";
-    if (words.size() != 3)
+    if (words.size() != 3) {
+      // A CR inside the line (not its CRLF end): lines that end in CR alone, which are not
+      // taken for line ends here (found by review: the message counted the fields of several).
+      const std::size_t cr = line.find('\r');
+      if (cr != std::string::npos && line.find_first_not_of("\r \t", cr) != std::string::npos)
+        throw MeshError(at + "its lines end in CR alone (classic Mac OS): convert them to LF or CRLF");
       throw MeshError(at + "expected 3 numbers 'x y z', found " + plural(words.size(), "field"));
+    }
     Vec3 p;
     for (int k = 0; k < 3; ++k) {
       switch (parseDouble(words[k], p[k])) {

@@ -973,6 +973,11 @@ TEST_CASE("readPoints refuses malformed lines with 'PATH:LINE: problem'", "[mesh
   // A line without end (found by review: /dev/zero grew one until memory ran out).
   const std::string endless = dir.write("endless.txt", "0 0 0\n" + std::string(3 << 20, '0'));
   CHECK_THAT(pointsError(endless), StartsWith(endless + ":2: ") && Contains("line longer than 1048576 bytes"));
+  // Lines ended by CR alone are refused as such (found by review: the message counted 6 fields).
+  const std::string cr = dir.write("cr.txt", "1 2 3\r4 5 6\r");
+  CHECK_THAT(pointsError(cr), StartsWith(cr + ":1: ") && Contains("CR alone"));
+  const std::string crlf_four = dir.write("crlf4.txt", "1 2 3 4\r\n");  // a CRLF end is no CR-only line
+  CHECK_THAT(pointsError(crlf_four), Contains("found 4 fields"));
 }
 
 TEST_CASE("readPoints reads standard input for '-'", "[mesh_io]") {
