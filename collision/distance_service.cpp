@@ -645,11 +645,12 @@ struct DistanceService::Impl {
     // solid, whatever face it reached: far away (1e16 times the body's size) the distances of
     // opposite faces tie in doubles, and the pseudonormal of the far side said inside (found by
     // review).
-    const bool outside_box = squaredBoxDistance(b.box, p) > touch * touch;
     if (!hit.closed_body)
       hit.sign = HitSign::kUnsigned;
     else
-      hit.sign = !on_surface && !outside_box && offset.dot(normal) < 0 ? HitSign::kInside : HitSign::kOutside;
+      hit.sign = !on_surface && offset.dot(normal) < 0 && !(squaredBoxDistance(b.box, p) > touch * touch)
+                     ? HitSign::kInside
+                     : HitSign::kOutside;
     hit.signed_distance = hit.sign == HitSign::kInside ? -distance : distance;
     if (const Eigen::Isometry3d* pose = b.pose()) {
       hit.point = *pose * c;
@@ -827,8 +828,8 @@ struct DistanceService::Impl {
       const BestHit& hit = s.best[j];
       if (hit.c.triangle == kInvalidIndex) continue;  // set only for a hit within d
       const size_t i = first + j;
-      out.hits_[i] = makeHit(hit.slot, points.row(i).transpose(), hit.q, hit.c.triangle, hit.c.feature, hit.c.point, hit.c.barycentric,
-                             hit.c.distance, hit.touch);
+      out.hits_[i] = makeHit(hit.slot, points.row(i).transpose(), hit.q, hit.c.triangle, hit.c.feature,
+                             hit.c.point, hit.c.barycentric, hit.c.distance, hit.touch);
       out.count_[i] = 1;
       ++stats.hits;
     }

@@ -256,19 +256,19 @@ void QueryStream::reset() {
 // Exact squared distances from p to a leaf block's faces (out[lane]); counts the test and
 // returns the used lanes.
 uint32_t QueryStream::testLeaf(int32_t leaf, const Vec3& p, double out[8]) {
+  squaredDistancesToBlock(p, leafBlock(leaf), out);
+  return hierarchy_->leafLanes(leaf);
+}
+
+// A leaf's faces as a block, counted as tested: the inline block, or (moving geometry without
+// inline faces) the lanes' corners gathered from the positions.
+const TriangleBlock8& QueryStream::leafBlock(int32_t leaf) {
   const TreeGeometry& g = geometry();
-  const uint32_t used = hierarchy_->leafLanes(leaf);
   ++counters_.leaves_tested;
-  counters_.triangles_tested += used;
-  if (g.leaf_blocks) {
-    squaredDistancesToBlock(p, g.leaf_blocks[leaf], out);
-    return used;
-  }
-  // Moving geometry without inline faces: gather the lanes' corners from the positions.
-  const Hierarchy& h = *hierarchy_;
-  gatherLeafBlock(&h.leafCorners()[8 * static_cast<size_t>(leaf)], g.positions, gather_);
-  squaredDistancesToBlock(p, gather_, out);
-  return used;
+  counters_.triangles_tested += hierarchy_->leafLanes(leaf);
+  if (g.leaf_blocks) return g.leaf_blocks[leaf];
+  gatherLeafBlock(&hierarchy_->leafCorners()[8 * static_cast<size_t>(leaf)], g.positions, gather_);
+  return gather_;
 }
 
 double QueryStream::squaredDistanceToFace(TriangleIndex face, const Vec3& p) const {
@@ -277,10 +277,8 @@ double QueryStream::squaredDistanceToFace(TriangleIndex face, const Vec3& p) con
   return squaredDistanceToTriangle(p, x[t[0]], x[t[1]], x[t[2]]);
 }
 
-TriangleHit QueryStream::hitOn(TriangleIndex face, const Vec3& p) const {
-  const Vec3* x = geometry().positions;
-  const Triangle& t = hierarchy_->mesh().triangles[face];
-  const TriangleClosest c = closestPointOnTriangle(p, x[t[0]], x[t[1]], x[t[2]]);
+namespace {
+TriangleHit hitFrom(TriangleIndex face, const TriangleClosest& c) {
   TriangleHit hit;
   hit.distance = std::sqrt(c.squared_distance);
   hit.triangle = face;
@@ -289,6 +287,14 @@ TriangleHit QueryStream::hitOn(TriangleIndex face, const Vec3& p) const {
   hit.feature = c.feature;
   return hit;
 }
+}  // namespace
+
+TriangleHit QueryStream::hitOn(TriangleIndex face, const Vec3& p) const {
+  const Vec3* x = geometry().positions;
+  const Triangle& t = hierarchy_->mesh().triangles[face];
+  return hitFrom(face, closestPointOnTriangle(p, x[t[0]], x[t[1]], x[t[2]]));
+}
+
 
 // Depth-first search from the root with best squared distance start2 (best_face holds its face).
 // With reach > 0, the faces within sqrt(best) + reach (as best shrinks) are gathered into
@@ -1084,13 +1090,7 @@ void QueryStream::within(const Vec3& p, double d, std::vector<TriangleHit>& out)
     stack_.pop_back();
     if (isLeafRef(entry.ref)) {
       const int32_t leaf = leafIndex(entry.ref);
-      const uint32_t used = h.leafLanes(leaf);
-      ++counters_.leaves_tested;
-      counters_.triangles_tested += used;
-      const TriangleBlock8* block = g.leaf_blocks ? &g.leaf_blocks[leaf] : &gather_;
-      // Moving geometry without inline faces: the lanes' corners from the positions.
-      if (!g.leaf_blocks) gatherLeafBlock(&h.leafCorners()[8 * static_cast<size_t>(leaf)], g.positions, gather_);
-      keepWithin(p, *block, lanes + 8 * static_cast<size_t>(leaf), used, d * d * (1 + 1e-9));
+      keepWithin(p, leafBlock(leaf), lanes + 8 * static_cast<size_t>(leaf), h.leafLanes(leaf), d * d * (1 + 1e-9));
       continue;
     }
     const Node8& node = g.nodes[entry.ref];
@@ -1109,15 +1109,9 @@ void QueryStream::keepWithin(const Vec3& p, const TriangleBlock8& block, const T
   closestPointsInBlock(p, block, exact, within_details_);
   for (uint32_t lane = 0; lane < lanes; ++lane) {
     if (!(exact[lane] <= d2)) continue;
-    const TriangleClosest c = blockLaneClosest(p, block, within_details_, static_cast<int>(lane));
-    TriangleHit hit;
-    hit.distance = std::sqrt(c.squared_distance);
-    hit.triangle = faces[lane];
-    hit.point = c.point;
-    hit.barycentric = c.barycentric;
-    hit.feature = c.feature;
-    within_keys_.push_back({std::sqrt(exact[lane]), faces[lane], static_cast<uint32_t>(within_hits_.size())});
-    within_hits_.push_back(hit);
+    // The hit's distance is its key's: the kernel's squared distance, bit for bit.
+    within_hits_.push_back(hitFrom(faces[lane], blockLaneClosest(p, block, within_details_, static_cast<int>(lane))));
+    within_keys_.push_back({within_hits_.back().distance, faces[lane], static_cast<uint32_t>(within_hits_.size() - 1)});
   }
 }
 

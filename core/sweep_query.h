@@ -225,6 +225,7 @@ class QueryStream {
 
   const TreeGeometry& geometry() const { return geometry_ ? *geometry_ : rest_; }
   uint32_t testLeaf(int32_t leaf, const Vec3& p, double out[8]);
+  const TriangleBlock8& leafBlock(int32_t leaf);
   TriangleHit hitOn(TriangleIndex face, const Vec3& p) const;
   // Squared distance from p to `face` at the current geometry's positions.
   double squaredDistanceToFace(TriangleIndex face, const Vec3& p) const;

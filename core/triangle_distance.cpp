@@ -221,12 +221,9 @@ inline double clamp01(double x) { return x > 1.0 ? 1.0 : (x < 0.0 ? 0.0 : x); }
 // height, sin / 2 of the length: 5e-18 of it at this threshold).
 constexpr double kQuadDegenerate = 1e-34;
 
+// A vector in another precision (exact from double to Quad; rounded back).
 template <class T, class S>
-inline V3<T> widen(const V3<S>& v) {
-  return {static_cast<T>(v.x), static_cast<T>(v.y), static_cast<T>(v.z)};
-}
-template <class T, class S>
-inline V3<T> narrow(const V3<S>& v) {
+inline V3<T> convert(const V3<S>& v) {
   return {static_cast<T>(v.x), static_cast<T>(v.y), static_cast<T>(v.z)};
 }
 
@@ -243,25 +240,25 @@ struct QuadPlane {
 inline QuadPlane quadProjection(const V3<double>& p, const Frame<double>& f) {
   QuadPlane r;
   Frame<Quad> g;
-  g.a = widen<Quad>(f.a);
-  g.b = widen<Quad>(f.b);
-  g.c = widen<Quad>(f.c);
+  g.a = convert<Quad>(f.a);
+  g.b = convert<Quad>(f.b);
+  g.c = convert<Quad>(f.c);
   const V3<Quad> ab = g.b - g.a, ac = g.c - g.a, bc = g.c - g.b;
   g.lab = dot(ab, ab);
   g.lac = dot(ac, ac);
   g.lbc = dot(bc, bc);
-  const V3<Quad> pq = widen<Quad>(p);
+  const V3<Quad> pq = convert<Quad>(p);
   fillFrame(pq, g);
   r.degenerate = !(g.det > static_cast<Quad>(kQuadDegenerate) * (g.lab * g.lac));
   if (r.degenerate) return r;
   const Projection<Quad> pr = projectOnPlane(pq, g);
-  r.q = narrow<double>(pr.q);
+  r.q = convert<double>(pr.q);
   const Quad zero = 0;
   const Quad sum = pr.wa + pr.wb + pr.wc;
   r.inside = pr.wa >= zero && pr.wb >= zero && pr.wc >= zero && sum > zero;
   if (!r.inside) return r;
   const Quad v = pr.wb / sum, w = pr.wc / sum;
-  r.rebuilt = narrow<double>(pointAt(g.a, v, g.ab, w, g.ac));
+  r.rebuilt = convert<double>(pointAt(g.a, v, g.ab, w, g.ac));
   r.bary[0] = static_cast<double>(pr.wa / sum);
   r.bary[1] = static_cast<double>(v);
   r.bary[2] = static_cast<double>(w);
@@ -370,13 +367,14 @@ inline double closestImpl(const Vec3& pe, const Vec3& ae, const Vec3& be, const 
   bool quad_done = false;
   bool thin_face = false;
   V3<double> face_point{};
+  Projection<double> proj{};  // a needle's, in doubles
   if (sliver) {
     quad = quadProjection(p, f);
     quad_done = true;
     thin_face = !quad.degenerate && quad.inside;
     face_point = quad.rebuilt;
   } else if (needle) {
-    const Projection<double> proj = projectOnPlane(p, f);
+    proj = projectOnPlane(p, f);
     if (edgeSignsCertain(p, f, proj)) {
       thin_face = proj.wa >= 0.0 && proj.wb >= 0.0 && proj.wc >= 0.0;
       face_point = proj.q;
@@ -410,7 +408,6 @@ inline double closestImpl(const Vec3& pe, const Vec3& ae, const Vec3& be, const 
       if (!quad_done) quad = quadProjection(p, f);
       for (int i = 0; i < 3; ++i) res.bary[i] = quad.bary[i];
       if (!quad.inside) {  // a needle certain in doubles but on an edge in quad: its point's edge
-        const Projection<double> proj = projectOnPlane(p, f);
         const double wa = std::max(proj.wa, 0.0), wb = std::max(proj.wb, 0.0), wc = std::max(proj.wc, 0.0);
         const double sum = wa + wb + wc;
         res.bary[0] = sum > 0 ? wa / sum : 1.0;
