@@ -53,7 +53,9 @@
 // --kinds=rigid,deforming,carried,limb  --threads=1,2  --steps=N  --methods=meshsweeper,embree
 // --reach=R (ServiceOptions::reach_steps)  --lead=L (ServiceOptions::lead_steps)
 // --no-frames (ServiceOptions::follow_frames off)  --no-regions (ServiceOptions::regional_drift
-// off)  --within=D  --data-dir=PATH  --broadphase. Exit code 77 when a mesh is missing.
+// off)  --within=D  --data-dir=PATH  --broadphase  --per-step (after each row, every step's CPU
+// time and, for Meshsweeper, the pairs certified and exact distances per pair). Exit code 77
+// when a mesh is missing.
 #include "bench/bench_util.h"
 #include "collision/broadphase.h"
 #include "collision/distance_service.h"
@@ -121,6 +123,7 @@ struct Options {
   bool broadphase = false;
   bool follow_frames = true;  // ServiceOptions::follow_frames (--no-frames: off)
   bool regional_drift = true;  // ServiceOptions::regional_drift (--no-regions: off)
+  bool per_step = false;       // --per-step: every step's time (and Meshsweeper's work) after each row
   double within = 0;  // > 0: QueryMode::kWithin with this distance (--within=D)
 };
 
@@ -174,6 +177,8 @@ Options parseOptions(int argc, char** argv) {
       o.follow_frames = false;
     } else if (flag == "--no-regions") {
       o.regional_drift = false;
+    } else if (flag == "--per-step") {
+      o.per_step = true;
     } else if (flag == "--broadphase") {
       o.broadphase = true;
     } else if (flag == "--within") {
@@ -609,7 +614,21 @@ struct RunResult {
   double pairs_per_point = 0;
   double certified_fraction = 0;
   size_t reanchored = 0;
+  std::vector<double> certified_per_step, triangles_per_step;  // [step] Meshsweeper: per pair
 };
+
+// --per-step: each step's CPU time of the calling thread, and for Meshsweeper the fraction of
+// pairs certified and the exact distances per pair.
+void printSteps(const RunResult& r) {
+  std::printf("\nstep | CPU ms%s\n", r.certified_per_step.empty() ? "" : " | certified | triangles/pair");
+  for (size_t k = 0; k < r.cpu.size(); ++k) {
+    std::printf("%zu | %.2f", k, 1e3 * r.cpu[k]);
+    if (k < r.certified_per_step.size())
+      std::printf(" | %.1f%% | %.1f", 100 * r.certified_per_step[k], r.triangles_per_step[k]);
+    std::printf("\n");
+  }
+  std::printf("\n");
+}
 
 // Meshsweeper: the service.
 RunResult runMeshsweeper(const Scene& scene, const std::vector<std::shared_ptr<const Hierarchy>>& hierarchies,
@@ -655,6 +674,8 @@ RunResult runMeshsweeper(const Scene& scene, const std::vector<std::shared_ptr<c
     r.process_cpu.push_back(processCpuSeconds() - process0);
     r.wall.push_back(secondsSince(start));
     pairs += out.stats().pairs;
+    r.certified_per_step.push_back(out.stats().pairs ? static_cast<double>(out.stats().certified_pairs) / static_cast<double>(out.stats().pairs) : 0.0);
+    r.triangles_per_step.push_back(out.stats().pairs ? static_cast<double>(out.stats().triangles_tested) / static_cast<double>(out.stats().pairs) : 0.0);
     certified += out.stats().certified_pairs;
     for (size_t i = 0; i < out.size(); ++i) hits += !out.hits(i).empty();
     if (step == 0 || step == steps - 1) {
@@ -992,6 +1013,7 @@ int main(int argc, char** argv) {
                         method == "meshsweeper" ? (std::to_string(static_cast<int>(100 * r.certified_fraction)) + "%").c_str()
                                                 : "-");
             std::fflush(stdout);
+            if (options.per_step) printSteps(r);
             if (!results.empty()) {
               std::string message;
               if (!sameAnswers(results.front().first, r.first, message) ||

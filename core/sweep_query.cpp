@@ -642,10 +642,10 @@ bool QueryStream::testSet(const CoherentState& state, const Vec3& p, double move
   if (!(moved < state.reach)) return false;
   const TreeGeometry& g = geometry();
   const Mesh& mesh = hierarchy_->mesh();
-  // Block 0 first; the rest only if they could be closer (or within the cap).
+  // Blocks in order, while they could be closer than the best so far (or within the cap).
   double exact[8];
   for (uint32_t first = 0; first < state.count; first += 8) {
-    if (first > 0 && state.block_lower[first / 8] - moved > std::min(std::sqrt(best2), within) * (1 + 1e-9)) break;
+    if (state.block_lower[first / 8] - moved > std::min(std::sqrt(best2), within) * (1 + 1e-9)) break;
     const uint32_t lanes = std::min<uint32_t>(8, state.count - first);
     gatherTriangleBlock(mesh.triangles.data(), g.positions, state.faces + first, lanes, gather_);
     squaredDistancesToBlock(p, gather_, exact);
@@ -779,12 +779,14 @@ ClosestPoint QueryStream::closestCoherent(const Vec3& p, CoherentState& state, b
   // from the warm start without one, twice as many each time the next set fails too (up to
   // kMaxWait), back to kClosestWait once a set pays. On bench_service's sheets a set that
   // certified fewer than 2 steps cost more than plain searches, and these waits measured best.
+  // A set gathered before the point's motion was measured (a cold state's first, with the
+  // least margin) tells nothing about that motion when it fails: no wait then.
   constexpr uint8_t kPayingSteps = 2, kClosestWait = 6, kMaxWait = 24;
   const bool tested = same_lineage && state.has_set;
   if (tested) certified = testSet(state, p, movedSinceSet(state, p, g), within, best2, face);
   if (certified && state.set_steps < 255) ++state.set_steps;
   if (certified && state.set_steps >= kPayingSteps) state.closest_backoff = 0;
-  if (!certified && tested && state.set_steps < kPayingSteps) {
+  if (!certified && tested && state.set_steps < kPayingSteps && !state.set_unmeasured) {
     state.closest_wait = std::max(kClosestWait, state.closest_backoff);
     state.closest_backoff = static_cast<uint8_t>(std::min<int>(2 * state.closest_wait, kMaxWait));
   }
@@ -813,6 +815,7 @@ ClosestPoint QueryStream::closestCoherent(const Vec3& p, CoherentState& state, b
     } else if (state.reach_steps > 0) {
       state.closest_wait = 0;
       state.set_steps = 0;
+      state.set_unmeasured = !(state.mean_step > 0);
       const SetPlan plan = planSet(state, g, same_lineage);
       const double reach = plan.reach;
       bool answered = false;
@@ -907,6 +910,7 @@ void QueryStream::withinCoherent(const Vec3& p, double d, CoherentState& state, 
     } else {
       // Gathered within d + 2R (planSet), ahead of p first.
       state.set_steps = 0;
+      state.set_unmeasured = !(state.mean_step > 0);
       const SetPlan plan = planSet(state, g, same_lineage);
       const double radius = d * (1 + 1e-9) + plan.reach;
       TriangleIndex ignored = kInvalidIndex;

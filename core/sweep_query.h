@@ -103,6 +103,8 @@ struct CoherentState {
                                      // (the last one failed within two tests: fast motion)
   uint8_t closest_backoff = 0;       // the next such wait (doubles while sets keep failing)
   uint8_t set_steps = 0;             // steps the set has certified since it was gathered (either mode)
+  bool set_unmeasured = false;       // the set was gathered before the point's motion was measured
+                                     // (a cold state's first): its failing is no sign of fast motion
   Vec3 last_point = Vec3::Zero();
   Eigen::Vector3f mean_velocity = Eigen::Vector3f::Zero();  // running mean of the point's steps
   TriangleIndex faces[kCoherentSetSize];        // candidates, in blocks of eight

@@ -576,6 +576,37 @@ TEST_CASE("coherent queries: a point too fast for its sets", "[coherent]") {
   CHECK(longest_plain_run >= 12);  // the wait doubled: the sets kept failing
 }
 
+// A cold state's first set is gathered before the point's motion is known (the least margin):
+// when it fails at the next step, that says nothing about the motion, so the state gathers a
+// set with the measured motion at once instead of waiting six steps, and that set certifies the
+// steps after it. Every answer exact.
+TEST_CASE("coherent queries: a cold state's first set fails without a wait", "[coherent]") {
+  const Mesh mesh = scenes::torus(1.0, 0.3, 96, 48);
+  const auto h = Hierarchy::build(mesh);
+  const Checker checker{mesh, meshDiagonal(mesh)};
+  QueryStream stream(h);
+  Failures f("closestCoherent(p, CoherentState) on a point starting at speed");
+  for (const double speed : {0.02, 0.03}) {
+    CoherentState state;
+    std::vector<bool> certified_at, set_after;
+    for (int i = 0; i < 12; ++i) {
+      const double angle = speed * i;
+      const Vec3 p(std::cos(angle), std::sin(angle), 0.3 + 0.01);
+      INFO("speed " << speed << ", step " << i << ", point " << text(p));
+      bool certified = false;
+      const ClosestPoint r = stream.closestCoherent(p, state, &certified);
+      checker.exact(r, p, Truth{bruteForceKClosest(mesh, p, 1)}, f);
+      certified_at.push_back(certified);
+      set_after.push_back(state.has_set);
+    }
+    INFO("speed " << speed);
+    CHECK(set_after[0]);         // the first set, gathered cold
+    CHECK_FALSE(certified_at[1]);  // too small a margin for this speed
+    CHECK(set_after[1]);         // gathered again at once, no wait
+    for (int i = 2; i < 6; ++i) CHECK(certified_at[i]);
+  }
+}
+
 // withinCoherent answers from a compact state's set while its certificate holds: the same faces,
 // hits and order as within() (bitwise) at every step, along paths with a radius that changes
 // every step (sometimes 0, sometimes so large that no set can hold the faces within it, NaN,
