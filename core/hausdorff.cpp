@@ -1096,7 +1096,7 @@ double effectiveTolerance(const HausdorffOptions& options, const Mesh& a) {
     throw std::invalid_argument("hausdorff: relative tolerance must be finite and > 0");
   const double tolerance = options.relative_tolerance * meshDiagonal(a);
   if (!(tolerance > 0))
-    throw std::invalid_argument("hausdorff: " + a.name +
+    throw std::invalid_argument("hausdorff: " + (a.name.empty() ? std::string("mesh A") : a.name) +
                                 " has zero extent; give an absolute tolerance");
   return tolerance;
 }
@@ -1187,6 +1187,7 @@ HausdorffResult run(const Mesh& a, const std::shared_ptr<const Hierarchy>& a_hie
 HausdorffResult hausdorff(const std::shared_ptr<const Hierarchy>& a,
                           const std::shared_ptr<const Hierarchy>& b,
                           const HausdorffOptions& options) {
+  if (!a || !b) throw std::invalid_argument("hausdorff: a hierarchy is null");
   return run(a->mesh(), a, b, options, Clock::now(), 0);
 }
 
@@ -1205,6 +1206,7 @@ HausdorffResult hausdorff(const Mesh& a, const Mesh& b, const HausdorffOptions& 
 
 HausdorffResult hausdorffOneSided(const Mesh& a, const std::shared_ptr<const Hierarchy>& b,
                                   const HausdorffOptions& options) {
+  if (!b) throw std::invalid_argument("hausdorffOneSided: B's hierarchy is null");
   checkOrThrow(a);
   return run(a, nullptr, b, options, Clock::now(), 0);
 }

@@ -123,8 +123,9 @@ struct HausdorffResult {
 // std::invalid_argument if the tolerance is negative, NaN or infinite, or if the effective
 // tolerance is 0 (relative tolerance on a mesh of zero extent).
 HausdorffResult hausdorff(const Mesh& a, const Mesh& b, const HausdorffOptions& options = {});
-// The same with hierarchies the caller already built (shared, read-only; both non-null).
-// The relative tolerance uses the diagonal of a->mesh(). build_seconds is 0.
+// The same with hierarchies the caller already built (shared, read-only; a null one throws
+// std::invalid_argument). The relative tolerance uses the diagonal of a->mesh(). build_seconds
+// is 0.
 HausdorffResult hausdorff(const std::shared_ptr<const Hierarchy>& a,
                           const std::shared_ptr<const Hierarchy>& b,
                           const HausdorffOptions& options = {});
@@ -132,7 +133,7 @@ HausdorffResult hausdorff(const std::shared_ptr<const Hierarchy>& a,
 // One-sided h(A, B) only: needs B's hierarchy only. result.lower/upper bound h(A, B).
 HausdorffResult hausdorffOneSided(const Mesh& a, const Mesh& b,
                                   const HausdorffOptions& options = {});
-// The same with B's hierarchy already built (non-null).
+// The same with B's hierarchy already built (null: std::invalid_argument).
 HausdorffResult hausdorffOneSided(const Mesh& a, const std::shared_ptr<const Hierarchy>& b,
                                   const HausdorffOptions& options = {});
 

@@ -44,6 +44,7 @@
 #include <cassert>
 #include <cmath>
 #include <limits>
+#include <stdexcept>
 
 #if defined(__AVX__)
 #include <immintrin.h>
@@ -204,7 +205,7 @@ ClosestPoint unanswerable() {
 
 QueryStream::QueryStream(std::shared_ptr<const Hierarchy> hierarchy, CoherenceOptions options)
     : hierarchy_(std::move(hierarchy)), options_(options) {
-  assert(hierarchy_);
+  if (!hierarchy_) throw std::invalid_argument("QueryStream: null hierarchy");
   rest_ = hierarchy_->restGeometry();
   stack_.reserve(64);
   heap_.reserve(64);

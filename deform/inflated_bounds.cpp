@@ -34,6 +34,7 @@ double boxExtent(const std::vector<Node8>& nodes) {
 
 DeformingBody::DeformingBody(std::shared_ptr<const Hierarchy> hierarchy)
     : hierarchy_(std::move(hierarchy)) {
+  if (!hierarchy_) throw std::invalid_argument("DeformingBody: null hierarchy");
   const Hierarchy& h = *hierarchy_;
   anchor_nodes_ = h.nodes();
   anchor_extent_ = boxExtent(anchor_nodes_);

@@ -25,6 +25,7 @@ namespace meshsweeper {
 KeyframeBody::KeyframeBody(std::shared_ptr<const Hierarchy> hierarchy,
                            std::vector<std::vector<Vec3>> frames)
     : hierarchy_(std::move(hierarchy)), frames_(std::move(frames)) {
+  if (!hierarchy_) throw std::invalid_argument("KeyframeBody: null hierarchy");
   const Hierarchy& h = *hierarchy_;
   const size_t n = h.mesh().positions.size();
   if (frames_.empty()) throw std::invalid_argument("KeyframeBody: no key frame given");

@@ -7,6 +7,7 @@ namespace meshsweeper {
 
 RigidBody::RigidBody(std::shared_ptr<const Hierarchy> hierarchy, const Eigen::Isometry3d& pose)
     : hierarchy_(std::move(hierarchy)) {
+  if (!hierarchy_) throw std::invalid_argument("RigidBody: null hierarchy");
   setPose(pose);
 }
 

@@ -844,6 +844,14 @@ TEST_CASE("key frames: bad frames throw", "[deform][keyframe]") {
   CHECK_NOTHROW((KeyframeBody(h, Frames{mesh.positions, mesh.positions})));
 }
 
+// A null hierarchy is refused by every body, not dereferenced.
+TEST_CASE("bodies: a null hierarchy throws", "[deform]") {
+  const std::shared_ptr<const Hierarchy> none;
+  CHECK_THROWS_WITH(RigidBody(none), Catch::Contains("null hierarchy"));
+  CHECK_THROWS_WITH(DeformingBody(none), Catch::Contains("null hierarchy"));
+  CHECK_THROWS_WITH(KeyframeBody(none, {scenes::icosphere(1).positions}), Catch::Contains("null hierarchy"));
+}
+
 TEST_CASE("inflated bounds: displacements within the bounds are exact, others refused", "[deform][inflated]") {
   const Mesh* armadillo = realMesh("armadillo");
   REQUIRE(armadillo);

@@ -562,6 +562,14 @@ TEST_CASE("bad input: clear errors") {
   point.positions = {Vec3(1, 1, 1)};
   point.triangles = {Triangle{0, 0, 0}};
   CHECK_THROWS_AS(hausdorff(point, sphere), std::invalid_argument);
+  CHECK_THROWS_WITH(hausdorff(point, sphere), Catch::Contains("mesh A has zero extent"));  // unnamed
+  point.name = "dot.off";
+  CHECK_THROWS_WITH(hausdorff(point, sphere), Catch::Contains("dot.off has zero extent"));
+  // Null hierarchies are refused, not dereferenced.
+  const auto sphere_h = Hierarchy::build(sphere);
+  CHECK_THROWS_AS(hausdorff(nullptr, sphere_h), std::invalid_argument);
+  CHECK_THROWS_AS(hausdorff(sphere_h, nullptr), std::invalid_argument);
+  CHECK_THROWS_AS(hausdorffOneSided(sphere, std::shared_ptr<const Hierarchy>()), std::invalid_argument);
   const HausdorffResult r = hausdorff(point, sphere, absolute(1e-6));
   CHECK(r.a_to_b.lower == Approx(bruteDistance(sphere, Vec3(1, 1, 1))).epsilon(1e-14));
 }

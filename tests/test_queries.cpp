@@ -715,6 +715,10 @@ TEST_CASE("queries: ties at one reported distance go to the lowest index", "[que
   }
 }
 
+TEST_CASE("queries: a stream on a null hierarchy throws", "[queries][errors]") {
+  CHECK_THROWS_WITH(QueryStream(std::shared_ptr<const Hierarchy>()), Catch::Contains("null hierarchy"));
+}
+
 TEST_CASE("queries: points that are not finite or beyond 1e153 are answered without a search", "[queries][errors]") {
   // Every query kind gives NaN / no faces for them (squared distances would overflow), restarts
   // coherent state, and answers the next point in range as a fresh stream does.
