@@ -194,6 +194,11 @@ struct OffHeader {
   std::uint64_t vertices = 0;
   std::uint64_t faces = 0;
   std::uint64_t body_offset = 0;  // bytes before the first vertex line
+  // The keyword's prefixes ([ST][C][N][4]OFF): what CGAL reads on each vertex line after its
+  // 3 (4OFF: 4) coordinates: a normal (N, 3 or 4 numbers), colours (C: on vertex and face
+  // lines), texture coordinates (ST: 2 or 3 numbers, last).
+  bool textures = false, colors = false, normals = false, homogeneous = false;
+  std::string keyword;
 };
 
 // Skips whitespace and whole '#' comments, as CGAL's skip_comment_OFF does.
@@ -235,10 +240,12 @@ OffHeader checkOffHeader(const std::string& path, std::istream& in, std::uint64_
   const std::string keyword = readOffWord(in, 16);
   // CGAL's keyword grammar: [ST][C][N][4][n]OFF, or SKEL.
   std::size_t j = 0;
-  if (keyword.compare(j, 2, "ST") == 0) j += 2;
-  if (j < keyword.size() && keyword[j] == 'C') ++j;
-  if (j < keyword.size() && keyword[j] == 'N') ++j;
-  if (j < keyword.size() && keyword[j] == '4') ++j;
+  OffHeader header;
+  if (keyword.compare(j, 2, "ST") == 0) j += 2, header.textures = true;
+  if (j < keyword.size() && keyword[j] == 'C') ++j, header.colors = true;
+  if (j < keyword.size() && keyword[j] == 'N') ++j, header.normals = true;
+  if (j < keyword.size() && keyword[j] == '4') ++j, header.homogeneous = true;
+  header.keyword = keyword;
   const bool n_dimensional = j < keyword.size() && keyword[j] == 'n';
   if (n_dimensional) ++j;
   if (keyword.substr(j) != "OFF") {
@@ -247,9 +254,10 @@ OffHeader checkOffHeader(const std::string& path, std::istream& in, std::uint64_
     fail(path, "not an OFF file (the header does not start with 'OFF')");
   }
   if (n_dimensional) fail(path, "n-dimensional OFF (" + keyword + ") is not supported");
+  if (in.peek() == '#')  // CGAL's reader fails there
+    fail(path, "a comment right after the '" + keyword + "' keyword (put a blank before the '#')");
 
   skipOffSpaceAndComments(in);
-  OffHeader header;
   if (std::isalpha(in.peek())) {
     if (readOffWord(in, 16) == "BINARY")
       fail(path, "binary OFF is not supported (CGAL 5.5 misreads its faces); convert it to ASCII "
@@ -270,6 +278,8 @@ OffHeader checkOffHeader(const std::string& path, std::istream& in, std::uint64_
     fail(path, "the OFF header line with the vertex and face counts has no edge count (write "
                "'" + std::to_string(header.vertices) + " " + std::to_string(header.faces) +
                " 0')");
+  if (edges > static_cast<std::uint64_t>(std::numeric_limits<int>::max()))  // CGAL reads an int
+    fail(path, "the OFF header's edge count " + std::to_string(edges) + " is too large (it is not read: write 0)");
   int c;
   while ((c = in.get()) != EOF && c != '\n') {}
   if (!in && !in.eof()) fail(path, "read error in the OFF header");
@@ -329,6 +339,19 @@ bool nextDataLine(std::istream& in, std::string& line, std::uint64_t& line_numbe
 // truncates them (0.9 becomes 0, -0.5 becomes 0), and ignores whatever follows the declared
 // faces; here they must be integers and nothing but comments may follow. Returns the first
 // problem ("line L: ..."), or an empty string.
+// A COFF line's colour: `count` numbers from words[first]. CGAL takes 1 as an index into its
+// colour map (cast to int: a negative or huge one reads outside the map) and 3 or more as
+// red, green, blue; 2 makes it read past them.
+std::string checkOffColor(const std::vector<std::string_view>& words, std::size_t first, std::size_t count) {
+  if (count == 2) return "a colour needs 1, 3 or 4 numbers, not 2";
+  if (count != 1) return {};
+  double index = 0;
+  if (parseDouble(words[first], index) != NumberStatus::kOk || !(index >= 0) ||
+      index > std::numeric_limits<int>::max() || std::floor(index) != index)
+    return "colour-map index " + shown(words[first]) + " is not a whole number from 0 up";
+  return {};
+}
+
 std::string checkOffBody(std::istream& in, const OffHeader& header) {
   in.clear();
   in.seekg(0);
@@ -355,6 +378,20 @@ std::string checkOffBody(std::istream& in, const OffHeader& header) {
     if (numbers < 3)
       return "line " + std::to_string(line_number) + ": vertex " + std::to_string(v) +
              " has fewer than 3 coordinates";
+    // The keyword's other numbers, as CGAL's scanner takes them (it indexes past the line's
+    // numbers when they are missing, and a colour-map index outside an int crashes it).
+    const std::size_t h = header.homogeneous ? 1 : 0;
+    const std::size_t needed = 3 + h + (header.normals ? 3 + h : 0) + (header.textures ? 2 + h : 0);
+    if (numbers < needed)
+      return "line " + std::to_string(line_number) + ": vertex " + std::to_string(v) + " has " +
+             plural(numbers, "number") + ", but a vertex of " + header.keyword + " needs " + std::to_string(needed) +
+             " (" + std::to_string(3 + h) + " coordinates" + (header.normals ? ", a normal" : "") +
+             (header.textures ? ", texture coordinates" : "") + ")";
+    if (header.colors) {
+      const std::string problem = checkOffColor(words, 3 + h + (header.normals ? 3 + h : 0), numbers - needed);
+      if (!problem.empty())
+        return "line " + std::to_string(line_number) + ": vertex " + std::to_string(v) + ": " + problem;
+    }
   }
   for (std::uint64_t f = 0; f < header.faces; ++f) {
     if (!nextDataLine(in, line, line_number))
@@ -380,6 +417,14 @@ std::string checkOffBody(std::istream& in, const OffHeader& header) {
       if (index < 0 || static_cast<std::uint64_t>(index) >= header.vertices)
         return where + " uses vertex " + std::string(words[k]) + " but the file has " +
                plural(header.vertices, "vertex");
+    }
+    if (header.colors) {
+      std::size_t numbers = static_cast<std::size_t>(corners) + 1;
+      double value;
+      while (numbers < words.size() && parseDouble(words[numbers], value) == NumberStatus::kOk) ++numbers;
+      const std::size_t first = static_cast<std::size_t>(corners) + 1;
+      const std::string problem = checkOffColor(words, first, numbers - first);
+      if (!problem.empty()) return where + ": " + problem;
     }
   }
   if (nextDataLine(in, line, line_number)) {
@@ -412,6 +457,16 @@ std::string checkObjFaces(const std::string& text) {
     while (nextDataLine(in, line, line_number)) {
       const auto words = splitWords(line);
       if (words[0] == "v") {
+        // CGAL reads coordinates with operator>>, which stops inside a word ('1-5' is 1 and
+        // -5, '3abc' is 3): each of the first three must be a number, whole.
+        if (pass == 1)
+          for (std::size_t k = 1; k <= 3; ++k) {
+            const std::string at = "line " + std::to_string(line_number) + ": vertex " + std::to_string(so_far);
+            double value;
+            if (k >= words.size()) return at + " has fewer than 3 coordinates";
+            if (parseDouble(words[k], value) != NumberStatus::kOk)
+              return at + ": " + shown(words[k]) + " is not a finite number";
+          }
         ++so_far;
         continue;
       }
@@ -484,9 +539,43 @@ void triangulatePolygon(const std::vector<Vec3>& x, std::vector<VertexIndex>& ri
   auto inside = [&](VertexIndex q, VertexIndex a, VertexIndex b, VertexIndex c) {  // closed triangle, along the normal
     return turn(a, b, q) >= 0 && turn(b, c, q) >= 0 && turn(c, a, q) >= 0;
   };
-  // A corner at the position of one of the ear's (a pinched polygon) does not block it.
-  auto elsewhere = [&](VertexIndex q, VertexIndex a, VertexIndex b, VertexIndex c) {
-    return x[q] != x[a] && x[q] != x[b] && x[q] != x[c];
+  // A corner at the position of one of the ear's (a pinched polygon) blocks it only when one of
+  // its edges enters the ear: its other end strictly inside the ear's angle at that corner.
+  auto left = [&](VertexIndex p0, VertexIndex p1, VertexIndex q) {
+    return (x[p1] - x[p0]).cross(x[q] - x[p0]).dot(normal) > 0;
+  };
+  auto enters = [&](VertexIndex end, VertexIndex a, VertexIndex b, VertexIndex c, const Vec3& at) {
+    if (at == x[a]) return left(c, a, end) && left(a, b, end);
+    if (at == x[b]) return left(a, b, end) && left(b, c, end);
+    return left(b, c, end) && left(c, a, end);
+  };
+  // The signed area (times |normal|, twice) the ring still encloses.
+  auto enclosed = [&] {
+    const Vec3& o = x[ring[0]];
+    Vec3 sum = Vec3::Zero();
+    for (std::size_t i = 1; i + 1 < ring.size(); ++i) sum += (x[ring[i]] - o).cross(x[ring[i + 1]] - o);
+    return sum.dot(normal);
+  };
+  // Whether the ring's distinct edges fit in its ring.size() - 2 triangles; if so, appends them
+  // as degenerate triangles.
+  auto spikes = [&] {
+    std::vector<std::pair<VertexIndex, VertexIndex>> edges;
+    const std::size_t n = ring.size();
+    for (std::size_t i = 0; i < n; ++i) {
+      const VertexIndex p = ring[i], q = ring[(i + 1) % n];
+      if (x[p] == x[q]) continue;
+      const bool seen = std::any_of(edges.begin(), edges.end(), [&](const auto& e) {
+        return (x[e.first] == x[p] && x[e.second] == x[q]) || (x[e.first] == x[q] && x[e.second] == x[p]);
+      });
+      if (!seen) edges.emplace_back(p, q);
+      if (edges.size() > n - 2) return false;
+    }
+    if (edges.empty()) edges.emplace_back(ring[0], ring[1]);  // every corner at one position
+    for (std::size_t t = 0; t < n - 2; ++t) {
+      const auto& e = edges[std::min(t, edges.size() - 1)];
+      out.push_back({e.first, e.second, e.second});
+    }
+    return true;
   };
   // Kept to fan the polygon whole if the budget runs out.
   const std::vector<VertexIndex> corners = ring;
@@ -494,6 +583,11 @@ void triangulatePolygon(const std::vector<Vec3>& x, std::vector<VertexIndex>& ri
   std::size_t from = 0;  // the search resumes next to the last ear: near-quadratic in all
   while (ring.size() > 3) {
     const std::size_t n = ring.size();
+    // A ring that encloses nothing more is what a pinched polygon leaves: spikes, each edge
+    // traversed both ways, along the ears' edges or slits of the polygon. Any ear or fan
+    // triangle cut from it would cover area outside the polygon: its edges become degenerate
+    // triangles instead (k - 2 still, the last repeated).
+    if (!(enclosed() > 1e-12 * normal.squaredNorm()) && spikes()) return;
     bool cut = false;
     for (std::size_t step = 0; step < n && !cut; ++step) {
       const std::size_t i = (from + step) % n;
@@ -502,7 +596,12 @@ void triangulatePolygon(const std::vector<Vec3>& x, std::vector<VertexIndex>& ri
       bool empty = turn(a, b, c) > 0;  // reflex or flat: not an ear
       for (std::size_t j = 0; j < n && empty; ++j, ++work) {
         const VertexIndex q = ring[j];
-        if (elsewhere(q, a, b, c)) empty = !inside(q, a, b, c);
+        const Vec3& at = x[q];
+        if (at != x[a] && at != x[b] && at != x[c]) {
+          empty = !inside(q, a, b, c);
+        } else if (j != (i + n - 1) % n && j != i && j != (i + 1) % n) {
+          empty = !enters(ring[(j + n - 1) % n], a, b, c, at) && !enters(ring[(j + 1) % n], a, b, c, at);
+        }
       }
       if (work >= ear_work_left) {
         ear_work_left = 0;
@@ -1239,9 +1338,14 @@ Mesh readMesh(const std::string& path) {
              ((first + 1 == end && end < text.size()) || text[first + 1] == ' ' || text[first + 1] == '\r');
     };
     // Line elements ('l', polylines of an exporter's loose edges) are not faces, and CGAL's
-    // reader refuses them: they become comments (line numbers kept).
+    // reader refuses them: they become comments (line numbers kept). A '#' starts a comment
+    // anywhere on a line, as for the checks here (CGAL would read 'f 1 2#x 3' as 1 2 3).
     statements([&](size_t first, size_t end) {
       if (keyword(first, end, 'l')) text[first] = '#';
+      const size_t hash = text.find('#', first);
+      if (hash < end && hash != first)
+        for (size_t i = hash; i < end; ++i)
+          if (text[i] != '\r') text[i] = ' ';
     });
     const std::string problem = checkObjFaces(text);
     if (!problem.empty()) fail(path, problem);

@@ -176,6 +176,32 @@ TEST_CASE("OFF header variants: counts on the keyword line, CRLF, COFF colours",
     CHECK_THAT(readError(dir.write("between.off", "OFF\n4 # vertices\n1 0\n" + body)),
                Contains("between.off: the OFF header has a comment between its vertex and face counts"));
   }
+  SECTION("colours CGAL cannot read safely are refused by line; its keyword variants checked") {
+    // Found by review: a negative or huge colour-map index crashed CGAL's reader, a colour of 2
+    // numbers made it read past them; NOFF or 4OFF vertices short of numbers got a vague message.
+    const std::string square = "0 0 0\n1 0 0\n1 1 0\n0 1 0\n";
+    CHECK_THAT(readError(dir.write("neg.off", "COFF\n4 1 0\n" + square + "4 0 1 2 3 -100000000\n")),
+               Contains("line 7: face 0: colour-map index '-100000000'"));
+    CHECK_THAT(readError(dir.write("huge.off", "COFF\n4 1 0\n" + square + "4 0 1 2 3 1e10\n")),
+               Contains("colour-map index '1e10'"));
+    CHECK_THAT(readError(dir.write("vneg.off", "COFF\n4 1 0\n0 0 0 -5\n1 0 0\n1 1 0\n0 1 0\n4 0 1 2 3\n")),
+               Contains("line 3: vertex 0: colour-map index '-5'"));
+    CHECK_THAT(readError(dir.write("two.off", "COFF\n4 1 0\n" + square + "4 0 1 2 3 10 20\n")),
+               Contains("a colour needs 1, 3 or 4 numbers, not 2"));
+    CHECK(meshsweeper::readMesh(dir.write("index.off", "COFF\n4 1 0\n0 0 0 7\n1 0 0 200\n1 1 0\n0 1 0\n4 0 1 2 3 5\n"))
+              .triangles == expected);
+    CHECK_THAT(readError(dir.write("noff.off", "NOFF\n4 1 0\n" + square + "4 0 1 2 3\n")),
+               Contains("line 3: vertex 0 has 3 numbers, but a vertex of NOFF needs 6"));
+    const Mesh normals = meshsweeper::readMesh(dir.write(
+        "normals.off", "NOFF\n4 1 0\n0 0 0 0 0 1\n1 0 0 0 0 1\n1 1 0 0 0 1\n0 1 0 0 0 1\n4 0 1 2 3\n"));
+    CHECK(normals.positions == kSquare);
+    CHECK_THAT(readError(dir.write("four.off", "4OFF\n4 1 0\n" + square + "4 0 1 2 3\n")),
+               Contains("a vertex of 4OFF needs 4"));
+    CHECK_THAT(readError(dir.write("glued.off", "OFF#c\n4 1 0\n" + square + "4 0 1 2 3\n")),
+               Contains("a comment right after the 'OFF' keyword"));
+    CHECK_THAT(readError(dir.write("edges.off", "OFF\n4 1 99999999999\n" + square + "4 0 1 2 3\n")),
+               Contains("edge count 99999999999 is too large"));
+  }
   SECTION("upper-case extension") {
     const Mesh mesh =
         meshsweeper::readMesh(dir.write("UPPER.OFF", "OFF\n3 1 0\n0 0 0\n1 0 0\n1 1 0\n3 0 1 2\n"));
@@ -231,6 +257,16 @@ TEST_CASE("OBJ: order kept, v/vt/vn faces, negative indices, ignored statements"
       "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nvt 0 0\nf 1/" + std::string(255, '0') + "4/1 2 3\n"));
   const std::vector<Triangle> one = {{0, 1, 2}};
   CHECK(long_corner.triangles == one);
+  // Vertex coordinates are whole numbers (found by review: CGAL's stream read '1-5' as 1 and
+  // -5, '3abc' as 3); '#' starts a comment anywhere (CGAL read 'f 1 2#x 3' as a triangle).
+  const std::string rest = "v 0 1 0\nf 1 2 3\n";
+  CHECK_THAT(readError(dir.write("minus.obj", "v 0 0 0\nv 1-5 0 0\n" + rest)), Contains("line 2: vertex 1: '1-5'"));
+  CHECK_THAT(readError(dir.write("dots.obj", "v 0 0 0\nv 1.5.7 0 0\n" + rest)), Contains("'1.5.7'"));
+  CHECK_THAT(readError(dir.write("abc.obj", "v 1 2 3abc\nv 1 0 0\n" + rest)), Contains("line 1: vertex 0: '3abc'"));
+  CHECK_THAT(readError(dir.write("two.obj", "v 0 0\nv 1 0 0\n" + rest)), Contains("line 1: vertex 0 has fewer than 3"));
+  CHECK_THAT(readError(dir.write("hash.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2#x 3\n")), Contains("2 corners"));
+  CHECK(meshsweeper::readMesh(dir.write("extra.obj", "v 0 0 0 1 # w\nv 1 0 0 0.5 0.5 0.5\nv 0 1 0\nf 1 2 3 # one\n"))
+            .triangles == one);
 }
 
 TEST_CASE("ASCII PLY: order kept, extra properties skipped, polygons fan-triangulated", "[mesh_io]") {
@@ -304,6 +340,28 @@ TEST_CASE("polygons: the fan where it is right, ears where it is not", "[mesh_io
       dir.write("pinched.off", "OFF\n6 1 0\n0 0 0\n2 0 0\n1 1 0\n2 2 0\n0 2 0\n1 1 0\n6 0 1 2 3 4 5\n"));
   CHECK(pinched.triangles.size() == 4);
   CHECK(covered(pinched) == Approx(2.0).epsilon(1e-15));
+  // Two lobes touching at (2, 1), listed from a corner where the last ear would have been cut
+  // from the spikes left over (found by review: a triangle (0,2), (2,1), (4,2) outside the
+  // polygon, distance 0 at points 0.8 away); the touching corner as two vertices and as one.
+  for (const char* text : {"OFF\n6 1 0\n0 0 0\n2 1 0\n4 0 0\n4 2 0\n2 1 0\n0 2 0\n6 0 1 2 3 4 5\n",
+                           "OFF\n5 1 0\n0 0 0\n2 1 0\n4 0 0\n4 2 0\n0 2 0\n6 0 1 2 3 1 4\n"}) {
+    const Mesh lobes = meshsweeper::readMesh(dir.write("lobes.off", text));
+    INFO(text);
+    CHECK(lobes.triangles.size() == 4);
+    CHECK(covered(lobes) == Approx(4.0).epsilon(1e-15));
+    CHECK(bruteForceClosest(lobes, Vec3(2, 1.9, 0)).distance == Approx(0.9 * 2 / std::sqrt(5.0)).epsilon(1e-12));
+    CHECK(bruteForceClosest(lobes, Vec3(3, 1.8, 0)).distance == Approx(0.6 / std::sqrt(5.0)).epsilon(1e-12));
+    CHECK(bruteForceClosest(lobes, Vec3(1, 0.5, 0)).distance == 0);  // inside a lobe
+  }
+  // A triangle and a square touching at a corner, listed from the triangle's far tip: the
+  // spikes left over become degenerate triangles along edges, not a fan across the gap.
+  const Mesh touching = meshsweeper::readMesh(dir.write(
+      "touching.off", "OFF\n7 1 0\n0 0 0\n1 -1 0\n1 1 0\n1 -1 0\n3 -1 0\n3 1 0\n1 1 0\n7 2 0 1 3 4 5 6\n"));
+  CHECK(touching.triangles.size() == 5);
+  CHECK(covered(touching) == Approx(5.0).epsilon(1e-15));
+  CHECK(bruteForceClosest(touching, Vec3(1.5, 0, 0)).distance == 0);
+  CHECK(bruteForceClosest(touching, Vec3(0.5, 0.4, 0)).distance == 0);
+  CHECK(bruteForceClosest(touching, Vec3(0.5, 0.6, 0)).distance == Approx(0.1 / std::sqrt(2.0)).epsilon(1e-12));
   // A star of 2,000 corners (radii 1 and 0.5 in turn) from a reflex corner: ears, exact area.
   std::string star = "OFF\n2000 1 0\n";
   double star_area = 0;
