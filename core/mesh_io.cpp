@@ -387,6 +387,13 @@ std::string checkOffBody(std::istream& in, const OffHeader& header) {
              plural(numbers, "number") + ", but a vertex of " + header.keyword + " needs " + std::to_string(needed) +
              " (" + std::to_string(3 + h) + " coordinates" + (header.normals ? ", a normal" : "") +
              (header.textures ? ", texture coordinates" : "") + ")";
+    if (header.homogeneous) {  // CGAL divides the coordinates by the fourth number
+      double x[4];
+      for (std::size_t k = 0; k < 4; ++k) parseDouble(words[k], x[k]);
+      if (x[3] == 0 || !std::isfinite(x[0] / x[3]) || !std::isfinite(x[1] / x[3]) || !std::isfinite(x[2] / x[3]))
+        return "line " + std::to_string(line_number) + ": vertex " + std::to_string(v) + ": its coordinates divided by its weight " +
+               shown(words[3]) + " (the fourth number of a " + header.keyword + " vertex) are not finite";
+    }
     if (header.colors) {
       const std::string problem = checkOffColor(words, 3 + h + (header.normals ? 3 + h : 0), numbers - needed);
       if (!problem.empty())
@@ -1162,6 +1169,13 @@ bool checkStl(const std::string& path, std::istream& in, std::uint64_t file_size
     in.seekg(0);
     ascii_text.assign(std::istreambuf_iterator<char>(in), {});
     if (in.bad()) fail(path, "read error");
+    // A control byte no text holds (binary floats have many) after the header: a binary file,
+    // whose count asks for more bytes than it has (checked before checkAsciiStl blanks names).
+    const bool binary_bytes = std::any_of(ascii_text.begin() + std::min<std::size_t>(ascii_text.size(), kStlHeaderBytes),
+                                          ascii_text.end(), [](char c) {
+                                            const auto u = static_cast<unsigned char>(c);
+                                            return u < 32 && !std::isspace(u) && u != 0x1A;
+                                          });
     const std::string problem = checkAsciiStl(ascii_text);
     if (!problem.empty()) {
       // A binary file whose header starts with "solid " and whose size does not match its
@@ -1170,6 +1184,10 @@ bool checkStl(const std::string& path, std::istream& in, std::uint64_t file_size
         fail(path, "not a valid ASCII STL (" + problem + "), nor a binary one: its header declares " +
                        plural(triangles, "triangle") + " (" + std::to_string(needed) + " bytes) but the file has " +
                        std::to_string(file_size - needed) + " more bytes");
+      if (got == kStlHeaderBytes && triangles > 0 && binary_bytes)
+        fail(path, "a binary STL (its header starts with 'solid', but binary data follows): it declares " +
+                       plural(triangles, "triangle") + ", which need " + std::to_string(needed) +
+                       " bytes, but the file has " + std::to_string(file_size) + " (truncated file)");
       fail(path, problem);
     }
     return false;
@@ -1177,6 +1195,16 @@ bool checkStl(const std::string& path, std::istream& in, std::uint64_t file_size
   if (got < kStlHeaderBytes)
     fail(path, "not an ASCII STL (no 'solid') and too short for a binary STL (" +
                    std::to_string(file_size) + " bytes; the binary header alone has 84)");
+  // 'SOLID' or 'Solid' is no ASCII STL keyword (CGAL reads binary then): say so, not that a
+  // binary count of four letters is wrong.
+  std::uint64_t first = 0;
+  while (first < got && std::isspace(header[first])) ++first;
+  if (first + 6 <= got && !binary_size &&
+      std::equal(header + first, header + first + 5, "solid", [](unsigned char a, char b) { return std::tolower(a) == b; }) &&
+      (header[first + 5] == '\n' || isBlank(static_cast<char>(header[first + 5]))))
+    fail(path, "not an ASCII STL: it starts with '" + std::string(reinterpret_cast<const char*>(header + first), 5) +
+                   "', and ASCII STL keywords are lowercase ('solid'); nor a binary one (its size does not match "
+                   "the count its header would hold)");
   if (needed > file_size)
     fail(path, "the binary STL header declares " + plural(triangles, "triangle") + ", which need " +
                    std::to_string(needed) + " bytes, but the file has " + std::to_string(file_size) +
