@@ -342,7 +342,14 @@ bool nextDataLine(std::istream& in, std::string& line, std::uint64_t& line_numbe
 // A COFF line's colour: `count` numbers from words[first]. CGAL takes 1 as an index into its
 // colour map (cast to int: a negative or huge one reads outside the map) and 3 or more as
 // red, green, blue; 2 makes it read past them.
-std::string checkOffColor(const std::vector<std::string_view>& words, std::size_t first, std::size_t count) {
+// Once a vertex (face) has a colour, CGAL reads one for every later vertex (face): from past the
+// end of its numbers where it has none (found under ASan), so `coloured` carries that.
+std::string checkOffColor(const std::vector<std::string_view>& words, std::size_t first, std::size_t count,
+                          const char* element, bool& coloured) {
+  if (count == 0 && coloured)
+    return std::string("no colour, but an earlier ") + element + " has one (colour every " + element + " or none)";
+  if (count == 0) return {};
+  coloured = true;
   if (count == 2) return "a colour needs 1, 3 or 4 numbers, not 2";
   if (count != 1) return {};
   double index = 0;
@@ -360,6 +367,7 @@ std::string checkOffBody(std::istream& in, const OffHeader& header) {
   // Skip to the header's end by line counting: the body starts after the line holding it.
   while (static_cast<std::uint64_t>(in.tellg()) < header.body_offset && std::getline(in, line))
     ++line_number;
+  bool vertex_colours = false, face_colours = false;  // COFF: a vertex (face) before had a colour
   for (std::uint64_t v = 0; v < header.vertices; ++v) {
     if (!nextDataLine(in, line, line_number))
       return "the file ends after " + plural(v, "vertex") + " of the " +
@@ -395,7 +403,8 @@ std::string checkOffBody(std::istream& in, const OffHeader& header) {
                shown(words[3]) + " (the fourth number of a " + header.keyword + " vertex) are not finite";
     }
     if (header.colors) {
-      const std::string problem = checkOffColor(words, 3 + h + (header.normals ? 3 + h : 0), numbers - needed);
+      const std::string problem =
+          checkOffColor(words, 3 + h + (header.normals ? 3 + h : 0), numbers - needed, "vertex", vertex_colours);
       if (!problem.empty())
         return "line " + std::to_string(line_number) + ": vertex " + std::to_string(v) + ": " + problem;
     }
@@ -430,7 +439,7 @@ std::string checkOffBody(std::istream& in, const OffHeader& header) {
       double value;
       while (numbers < words.size() && parseDouble(words[numbers], value) == NumberStatus::kOk) ++numbers;
       const std::size_t first = static_cast<std::size_t>(corners) + 1;
-      const std::string problem = checkOffColor(words, first, numbers - first);
+      const std::string problem = checkOffColor(words, first, numbers - first, "face", face_colours);
       if (!problem.empty()) return where + ": " + problem;
     }
   }

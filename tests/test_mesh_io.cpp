@@ -188,8 +188,19 @@ TEST_CASE("OFF header variants: counts on the keyword line, CRLF, COFF colours",
                Contains("line 3: vertex 0: colour-map index '-5'"));
     CHECK_THAT(readError(dir.write("two.off", "COFF\n4 1 0\n" + square + "4 0 1 2 3 10 20\n")),
                Contains("a colour needs 1, 3 or 4 numbers, not 2"));
-    CHECK(meshsweeper::readMesh(dir.write("index.off", "COFF\n4 1 0\n0 0 0 7\n1 0 0 200\n1 1 0\n0 1 0\n4 0 1 2 3 5\n"))
+    CHECK(meshsweeper::readMesh(dir.write("index.off", "COFF\n4 1 0\n0 0 0 7\n1 0 0 200\n1 1 0 0.5 0.5 0.5\n"
+                                                       "0 1 0 9 9 9 1\n4 0 1 2 3 5\n"))
               .triangles == expected);
+    CHECK(meshsweeper::readMesh(dir.write("uncoloured.off", "COFF\n4 1 0\n" + square + "4 0 1 2 3\n")).triangles ==
+          expected);
+    // Found under ASan: once a vertex (face) has a colour, CGAL reads one for every later one,
+    // past the end of a line without.
+    CHECK_THAT(readError(dir.write("some.off", "COFF\n4 1 0\n0 0 0 7\n1 0 0 200\n1 1 0\n0 1 0\n4 0 1 2 3\n")),
+               Contains("line 5: vertex 2: no colour, but an earlier vertex has one (colour every vertex or none)"));
+    CHECK_THAT(readError(dir.write("some_faces.off", "COFF\n4 2 0\n" + square + "3 0 1 2 1 2 3\n3 0 2 3\n")),
+               Contains("line 8: face 1: no colour, but an earlier face has one"));
+    CHECK(meshsweeper::readMesh(dir.write("later.off", "COFF\n4 2 0\n" + square + "3 0 1 2\n3 0 2 3 4\n"))
+              .triangles.size() == 2);
     CHECK_THAT(readError(dir.write("noff.off", "NOFF\n4 1 0\n" + square + "4 0 1 2 3\n")),
                Contains("line 3: vertex 0 has 3 numbers, but a vertex of NOFF needs 6"));
     const Mesh normals = meshsweeper::readMesh(dir.write(
