@@ -199,6 +199,7 @@ struct OffHeader {
   // lines), texture coordinates (ST: 2 or 3 numbers, last).
   bool textures = false, colors = false, normals = false, homogeneous = false;
   std::string keyword;
+  std::uint64_t keyword_offset = 0;  // where the keyword starts
 };
 
 // Skips whitespace and whole '#' comments, as CGAL's skip_comment_OFF does.
@@ -237,10 +238,11 @@ bool readOffCount(std::istream& in, std::uint64_t& count) {
 // file size. Throws MeshError.
 OffHeader checkOffHeader(const std::string& path, std::istream& in, std::uint64_t file_size) {
   skipOffSpaceAndComments(in);
+  OffHeader header;
+  header.keyword_offset = static_cast<std::uint64_t>(in.tellg());
   const std::string keyword = readOffWord(in, 16);
   // CGAL's keyword grammar: [ST][C][N][4][n]OFF, or SKEL.
   std::size_t j = 0;
-  OffHeader header;
   if (keyword.compare(j, 2, "ST") == 0) j += 2, header.textures = true;
   if (j < keyword.size() && keyword[j] == 'C') ++j, header.colors = true;
   if (j < keyword.size() && keyword[j] == 'N') ++j, header.normals = true;
@@ -280,9 +282,18 @@ OffHeader checkOffHeader(const std::string& path, std::istream& in, std::uint64_
                " 0')");
   if (edges > static_cast<std::uint64_t>(std::numeric_limits<int>::max()))  // CGAL reads an int
     fail(path, "the OFF header's edge count " + std::to_string(edges) + " is too large (it is not read: write 0)");
+  // CGAL reads the rest of the counts' line as vertex 0's (found by review: '3 1 0 9 9 9' made
+  // (9, 9, 9) vertex 0, and every vertex one later): only blanks and a comment may follow.
+  std::string rest;
   int c;
-  while ((c = in.get()) != EOF && c != '\n') {}
+  while ((c = in.get()) != EOF && c != '\n') rest += static_cast<char>(c);
   if (!in && !in.eof()) fail(path, "read error in the OFF header");
+  const std::size_t word = rest.find_first_not_of(" \t\r\v\f");
+  if (word != std::string::npos && rest[word] != '#') {
+    const std::string_view after = std::string_view(rest).substr(word);
+    fail(path, "the OFF header line has more after its counts: " + shown(after.substr(0, after.find_first_of(" \t\r"))) +
+                   " (CGAL would read it as vertex 0: put each vertex on a line of its own)");
+  }
   in.clear();
   const std::streamoff position = in.tellg();
   header.body_offset = position < 0 ? file_size : static_cast<std::uint64_t>(position);
@@ -830,6 +841,25 @@ PlyHeader parsePlyHeader(const std::string& path, std::istream& in) {
   for (const PlyElement& element : header.elements) {
     const std::string what = "PLY element '" + element.name + "'";
     if (element.properties.empty() && element.count > 0) fail(path, what + " has no properties");
+    if (isVertexElement(element.name) || isFaceElement(element.name)) {
+      // CGAL reads colours when each of red/r, green/g and blue/b is a uchar, then the three of
+      // red, green and blue if red is one, else r, g and b, each cast to uchar: another type
+      // under one of those names crashed it (found by review).
+      auto uchar = [&](const char* name) {
+        const PlyProperty* p = element.find(name);
+        return p != nullptr && !p->list && p->type.bytes == 1 && p->type.integer && !p->type.is_signed;
+      };
+      if ((uchar("red") || uchar("r")) && (uchar("green") || uchar("g")) && (uchar("blue") || uchar("b"))) {
+        const bool long_names = uchar("red");
+        for (const char* name : long_names ? std::array{"red", "green", "blue"} : std::array{"r", "g", "b"}) {
+          const PlyProperty* p = element.find(name);
+          if (p != nullptr && !uchar(name))
+            fail(path, what + ": colour property '" + name + "' is " + (p->list ? "a list" : p->type_name) +
+                           ", but the others make it read as uchar (make '" + (long_names ? "red', 'green', 'blue'" : "r', 'g', 'b'") +
+                           " all uchar, or rename it)");
+        }
+      }
+    }
     if (isVertexElement(element.name)) {
       has_vertices = true;
       for (const char* axis : {"x", "y", "z"}) {
@@ -1102,6 +1132,11 @@ std::string checkAsciiStl(std::string& text) {
         // degenerate facets.
         if (k + 1 < words.size() && words[k + 1] == "normal") {
           if (k + 4 >= words.size()) return at + "'normal' needs 3 numbers";
+          for (std::size_t j = k + 2; j <= k + 4; ++j)  // CGAL takes a keyword there for one
+            for (const char* keyword : {"solid", "endsolid", "facet", "normal", "outer", "loop", "vertex", "endloop", "endfacet"})
+              if (words[j] == keyword)
+                return at + "the normal of facet " + std::to_string(facets - 1) + " has " + shown(words[j]) +
+                       " among its 3 numbers";
           k += 4;
         }
         continue;
@@ -1352,6 +1387,8 @@ Mesh readMesh(const std::string& path) {
     if (in.bad()) fail(path, "read error");
     for (char& c : text)
       if (isBlank(c) && c != '\r') c = ' ';
+    // Every statement ends with a line break, the last too (a bare 'l' there was not found).
+    if (!text.empty() && text.back() != '\n') text += '\n';
     // A DOS end-of-file byte (0x1A) alone on the file's last line is not a statement: old
     // exporters wrote one.
     const size_t last = text.find_last_not_of(" \r\n");
@@ -1399,12 +1436,26 @@ Mesh readMesh(const std::string& path) {
     });
     cgal_text.str(std::move(text));
   }
-  const bool from_memory = format == Format::kObj || (format == Format::kStl && !read_here);
-  std::istream& source = from_memory ? static_cast<std::istream&>(cgal_text) : in;
+  bool from_memory = format == Format::kObj || (format == Format::kStl && !read_here);
   if (format == Format::kOff) {
     const std::string problem = checkOffBody(in, off_header);
     if (!problem.empty()) fail(path, problem);
+    // The numbers after a vertex's coordinates (checked above) are not read: CGAL 5.5 reads
+    // texture coordinates from uninitialised indices when a file has no colours (found by
+    // review), so it is given the keyword without ST, C and N ('4' stays: it divides).
+    if (off_header.textures || off_header.colors || off_header.normals) {
+      in.clear();
+      in.seekg(0);
+      std::string text(std::istreambuf_iterator<char>(in), {});
+      if (in.bad() || text.size() < off_header.keyword_offset + off_header.keyword.size()) fail(path, "read error");
+      const std::string plain = off_header.homogeneous ? "4OFF" : "OFF";
+      text.replace(off_header.keyword_offset, off_header.keyword.size(),
+                   plain + std::string(off_header.keyword.size() - plain.size(), ' '));
+      cgal_text.str(std::move(text));
+      from_memory = true;
+    }
   }
+  std::istream& source = from_memory ? static_cast<std::istream&>(cgal_text) : in;
   in.clear();
   in.seekg(0);
   if (!in) fail(path, "cannot rewind the file");
@@ -1413,7 +1464,7 @@ Mesh readMesh(const std::string& path) {
   if (!read_here) try {
     const auto quiet = CGAL::parameters::verbose(false);
     switch (format) {
-      case Format::kOff: ok = CGAL::IO::read_OFF(in, points, polygons, quiet); break;
+      case Format::kOff: ok = CGAL::IO::read_OFF(source, points, polygons, quiet); break;
       case Format::kObj: ok = CGAL::IO::read_OBJ(source, points, polygons, quiet); break;
       case Format::kPly: ok = CGAL::IO::read_PLY(in, points, polygons, quiet); break;
       case Format::kStl: ok = CGAL::IO::read_STL(source, points, polygons, quiet); break;

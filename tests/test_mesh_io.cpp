@@ -199,6 +199,20 @@ TEST_CASE("OFF header variants: counts on the keyword line, CRLF, COFF colours",
                Contains("line 5: vertex 2: no colour, but an earlier vertex has one (colour every vertex or none)"));
     CHECK_THAT(readError(dir.write("some_faces.off", "COFF\n4 2 0\n" + square + "3 0 1 2 1 2 3\n3 0 2 3\n")),
                Contains("line 8: face 1: no colour, but an earlier face has one"));
+    // Found by review: CGAL read texture coordinates at uninitialised indices without colours;
+    // it is given the keyword without ST, C and N, and the positions alone count.
+    const Mesh textured = meshsweeper::readMesh(
+        dir.write("st.off", "STOFF\n4 1 0\n0 0 0 0 0\n1 0 0 1 0\n1 1 0 1 1\n0 1 0 0 1\n4 0 1 2 3\n"));
+    CHECK(textured.positions == kSquare);
+    CHECK(textured.triangles == expected);
+    const Mesh all = meshsweeper::readMesh(dir.write(
+        "stcn.off", "STCNOFF 4 1 0\n0 0 0 0 0 1 5 0 0\n1 0 0 0 0 1 5 1 0\n1 1 0 0 0 1 1 0 0 1 1\n"
+                    "0 1 0 0 0 1 0.5 0.5 0.5 0 1\n4 0 1 2 3 0 0 255\n"));
+    CHECK(all.positions == kSquare);
+    CHECK(all.triangles == expected);
+    CHECK(meshsweeper::readMesh(dir.write("st4.off", "ST4OFF\n4 1 0\n0 0 0 2 0 0 1\n2 0 0 2 1 0 1\n"
+                                                     "2 2 0 2 1 1 1\n0 2 0 2 0 1 1\n4 0 1 2 3\n"))
+              .positions == kSquare);
     CHECK(meshsweeper::readMesh(dir.write("later.off", "COFF\n4 2 0\n" + square + "3 0 1 2\n3 0 2 3 4\n"))
               .triangles.size() == 2);
     CHECK_THAT(readError(dir.write("noff.off", "NOFF\n4 1 0\n" + square + "4 0 1 2 3\n")),
@@ -212,6 +226,26 @@ TEST_CASE("OFF header variants: counts on the keyword line, CRLF, COFF colours",
                Contains("a comment right after the 'OFF' keyword"));
     CHECK_THAT(readError(dir.write("edges.off", "OFF\n4 1 99999999999\n" + square + "4 0 1 2 3\n")),
                Contains("edge count 99999999999 is too large"));
+    // Found by review: CGAL read what follows the counts on their line as vertex 0.
+    CHECK_THAT(readError(dir.write("after.off", "OFF\n3 1 0 9 9 9\n0 0 0\n1 0 0\n3 0 1 2\n3 0 1 2\n")),
+               Contains("the OFF header line has more after its counts: '9' (CGAL would read it as vertex 0"));
+    CHECK_THAT(readError(dir.write("half.off", "OFF 3 1 0.5 7 7\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n")),
+               Contains("more after its counts: '.5'"));
+    CHECK(meshsweeper::readMesh(dir.write("note.off", "OFF\n4 1 0 \t# counts\r\n" + square + "4 0 1 2 3\n")).positions ==
+          kSquare);
+    // CGAL refuses a digit as the keyword's second character; it is given '4OFF' for these.
+    for (const char* keyword : {"C4OFF", "N4OFF"}) {
+      INFO(keyword);
+      const std::string extra = keyword[0] == 'C' ? " 1 0 0" : " 0 0 1 1";
+      std::string text = std::string(keyword) + "\n4 1 0\n";
+      for (const char* v : {"0 0 0 1", "1 0 0 1", "1 1 0 1", "0 1 0 1"}) text += v + extra + "\n";
+      CHECK(meshsweeper::readMesh(dir.write("c4.off", text + "4 0 1 2 3\n")).positions == kSquare);
+    }
+    // A colour word CGAL would read part of ('-5' of '-5x') is not a colour here, and CGAL no
+    // longer reads colours at all.
+    CHECK(meshsweeper::readMesh(dir.write("suffix.off", "COFF\n4 1 0\n0 0 0 -100000x\n1 0 0 1\n1 1 0 1\n"
+                                                        "0 1 0 1\n4 0 1 2 3 -100000x\n"))
+              .positions == kSquare);
   }
   SECTION("upper-case extension") {
     const Mesh mesh =
@@ -262,6 +296,8 @@ TEST_CASE("OBJ: order kept, v/vt/vn faces, negative indices, ignored statements"
   CHECK(mesh.positions == kSquare);
   const std::vector<Triangle> expected = {{0, 1, 2}, {0, 2, 3}, {3, 2, 0}, {0, 2, 3}};
   CHECK(mesh.triangles == expected);
+  // A bare 'l' as the last line, with no line break after it (found by review).
+  CHECK(meshsweeper::readMesh(dir.write("last_l.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\nl")).triangles.size() == 1);
   // A corner's '/t/n' part longer than 256 characters (found by review: CGAL skips 256 after
   // the index and read the rest, here '4', as a further corner, making a quad).
   const Mesh long_corner = meshsweeper::readMesh(dir.write("long.obj",
@@ -709,6 +745,21 @@ TEST_CASE("readMesh refuses PLY headers it cannot read safely", "[mesh_io]") {
              Contains("item 1") && Contains("'x' is not a number"));
   CHECK_THAT(readError(dir.write("inf.ply", start + xyz + faces + "end_header\n0 0 0\n1 inf 0\n0 1 0\n3 0 1 2\n")),
              Contains("'inf' is not finite"));
+  // Found by review: colour properties of mixed names and types crashed CGAL's reader.
+  const std::string mixed = "property uchar red\nproperty float green\nproperty uchar g\nproperty uchar blue\n";
+  CHECK_THAT(readError(dir.write("mixed.ply", start + xyz + mixed + faces + "end_header\n0 0 0 1 0.5 2 3\n"
+                                              "1 0 0 1 0.5 2 3\n0 1 0 1 0.5 2 3\n3 0 1 2\n")),
+             Contains("PLY element 'vertex': colour property 'green' is float, but the others make it read as uchar"));
+  CHECK_THAT(readError(dir.write("mixed_face.ply", start + xyz + "element face 1\nproperty list uchar int vertex_indices\n" +
+                                                   "property uchar r\nproperty uchar green\nproperty list uchar int g\n"
+                                                   "property uchar b\nend_header\n" + "0 0 0\n1 0 0\n0 1 0\n" +
+                                                   "3 0 1 2 1 2 1 3 4\n")),
+             Contains("PLY element 'face': colour property 'g' is a list"));
+  const Mesh coloured = meshsweeper::readMesh(dir.write(
+      "colour.ply", start + xyz + "property uchar red\nproperty uchar green\nproperty uchar blue\nproperty float g\n" +
+                        faces + "end_header\n0 0 0 1 2 3 0.5\n1 0 0 1 2 3 0.5\n0 1 0 1 2 3 0.5\n3 0 1 2\n"));
+  CHECK(coloured.triangles.size() == 1);
+  CHECK(coloured.positions[1] == Vec3(1, 0, 0));
 }
 
 TEST_CASE("readMesh refuses truncated files", "[mesh_io]") {
@@ -777,6 +828,9 @@ TEST_CASE("readMesh refuses truncated files", "[mesh_io]") {
   // A binary file whose header starts with 'solid ' and which has bytes past its triangles.
   CHECK_THAT(readError(dir.write("solid_padded.stl", binaryStl("solid part", one, 1) + std::string(2, '\0'))),
              Contains("nor a binary one: its header declares 1 triangle (134 bytes) but the file has 2 more bytes"));
+  CHECK_THAT(readError(dir.write("normal_word.stl", "solid x\nfacet normal endfacet 0 0\nouter loop\nvertex 0 0 0\n"
+                                                    "vertex 1 0 0\nvertex 0 1 0\nendloop\nendfacet\nendsolid x\n")),
+             Contains("line 2: the normal of facet 0 has 'endfacet' among its 3 numbers"));
   // A truncated binary file whose header starts with 'solid': its binary bytes name it binary.
   CHECK_THAT(readError(dir.write("solid_cut.stl", binaryStl("solid part", one, 2))),
              Contains("a binary STL (its header starts with 'solid', but binary data follows): it declares 2 "
