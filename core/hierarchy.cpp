@@ -226,6 +226,7 @@ void slotDisplacements(const Hierarchy& h, const std::vector<double>& w, std::ve
 
 TreeGeometry Hierarchy::restGeometry() const {
   TreeGeometry g;
+  g.hierarchy = this;
   g.nodes = nodes_.data();
   g.leaf_blocks = leaf_blocks_.data();
   g.positions = mesh_.positions.data();

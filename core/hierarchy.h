@@ -65,6 +65,7 @@ double regionDistance(const RegionDrift& regions, uint32_t region, const Vec3& p
 // The geometry a query reads, over a Hierarchy's fixed topology (children, leaf lanes). The
 // Hierarchy provides its rest geometry; deform/ bodies provide per-frame geometry (moved
 // positions, refreshed or inflated bounds) with the same node and leaf layout.
+class Hierarchy;
 struct TreeGeometry {
   const Node8* nodes = nullptr;                // [node] boxes, eps, children, slot triangles
   const TriangleBlock8* leaf_blocks = nullptr;  // [leaf] inline faces; null: gather from positions
@@ -81,6 +82,8 @@ struct TreeGeometry {
   double drift = 0;
   // Optional (deforming bodies, DeformingBody): drift by region, for motion that is local.
   const RegionDrift* regions = nullptr;
+  // The hierarchy whose layout it has (QueryStream::setGeometry checks it).
+  const Hierarchy* hierarchy = nullptr;
 };
 
 

@@ -240,6 +240,12 @@ void QueryStream::frontTriangles(std::vector<FrontTriangle>& out) const {
 }
 
 void QueryStream::setGeometry(const TreeGeometry* geometry) {
+  // Another hierarchy's nodes and leaves would be read with this one's layout (found by
+  // review: out-of-range reads, or triangles of the other mesh).
+  if (geometry != nullptr && geometry->hierarchy != hierarchy_.get())
+    throw std::invalid_argument(
+        "QueryStream::setGeometry: the geometry belongs to another hierarchy than the stream's (build the "
+        "stream on the body's hierarchy)");
   geometry_ = geometry;
   reset();
 }

@@ -44,6 +44,7 @@ DeformingBody::DeformingBody(std::shared_ptr<const Hierarchy> hierarchy)
   anchor_positions_ = h.mesh().positions;
   positions_ = anchor_positions_;
   delta_.assign(positions_.size(), 0.0);
+  geometry_.hierarchy = hierarchy_.get();
   geometry_.nodes = nodes_.data();
   geometry_.leaf_blocks = nullptr;  // faces are gathered from the current positions
   geometry_.positions = positions_.data();
@@ -264,7 +265,7 @@ void DeformingBody::checkExtent(double diagonal, const char* what) const {
 
 void DeformingBody::checkSize(size_t count, const char* what) const {
   if (count != positions_.size())
-    throw std::invalid_argument(std::string("DeformingBody: ") + what + " has " + std::to_string(count) +
+    throw std::invalid_argument(std::string("DeformingBody: ") + what + " hold " + std::to_string(count) +
                                 " entries, the mesh has " + std::to_string(positions_.size()) + " vertices");
 }
 

@@ -64,6 +64,7 @@ KeyframeBody::KeyframeBody(std::shared_ptr<const Hierarchy> hierarchy,
   }
   nodes_ = h.nodes();
   positions_ = frames_[0];
+  geometry_.hierarchy = hierarchy_.get();
   geometry_.nodes = nodes_.data();
   geometry_.leaf_blocks = nullptr;  // faces are gathered from the interpolated positions
   geometry_.positions = positions_.data();
@@ -121,6 +122,8 @@ void KeyframeBody::interpolatedBounds(double t, std::vector<Node8>& out_nodes) c
 }
 
 void KeyframeBody::setTime(double t) {
+  // As the distance service's setTime (found by review: NaN silently read as frame 0).
+  if (!std::isfinite(t)) throw std::invalid_argument("KeyframeBody::setTime: the time " + std::to_string(t) + " is not finite");
   interpolatedBounds(t, nodes_);  // in place: same size, so geometry_.nodes stays valid
   time_ = clampedTime(t, frames_.size());
   geometry_.version = nextGeometryVersion();

@@ -40,13 +40,20 @@ ClosestPoint RigidBody::toWorld(ClosestPoint result) const {
   return result;
 }
 
+namespace {
+void checkStream(const QueryStream& stream, const Hierarchy* hierarchy) {
+  if (&stream.hierarchy() != hierarchy)
+    throw std::invalid_argument("RigidBody: the query stream is built on another hierarchy than the body's");
+}
+}  // namespace
+
 ClosestPoint RigidBody::closest(QueryStream& stream, const Vec3& world) const {
-  assert(&stream.hierarchy() == hierarchy_.get());
+  checkStream(stream, hierarchy_.get());
   return toWorld(stream.closest(toBody(world)));
 }
 
 ClosestPoint RigidBody::closestCoherent(QueryStream& stream, const Vec3& world) const {
-  assert(&stream.hierarchy() == hierarchy_.get());
+  checkStream(stream, hierarchy_.get());
   return toWorld(stream.closestCoherent(toBody(world)));
 }
 

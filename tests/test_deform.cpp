@@ -334,9 +334,8 @@ void checkKeyframes(const Mesh& mesh, size_t frame_count, size_t points_per_time
   QueryStream stream(h);
   stream.setGeometry(&body.geometry());
   const double end = static_cast<double>(frame_count - 1);
-  const double inf = std::numeric_limits<double>::infinity();
   std::vector<double> times = {0, 0.25, 0.5, 1, 1.37, end - 0.5, end - 1e-9, end, end / 3, 0.999999, -0.5, end + 4,
-                               inf, -inf};  // clamped: +inf is the last frame
+                               1e300, -1e300};  // clamped (not finite: refused, below)
   QueryChecks checks;
   Failures positions("KeyframeBody::positions() vs interpolation"), bounds("validateGeometry");
   for (size_t ti = 0; ti < times.size(); ++ti) {
@@ -842,6 +841,15 @@ TEST_CASE("key frames: bad frames throw", "[deform][keyframe]") {
   huge_frame[1].x() = 1e60;
   CHECK_THROWS_WITH(KeyframeBody(h, Frames{mesh.positions, huge_frame}), Catch::Contains("supported mesh size"));
   CHECK_NOTHROW((KeyframeBody(h, Frames{mesh.positions, mesh.positions})));
+  // A time that is not finite throws (and leaves the body at its time); one outside the
+  // frames is clamped.
+  KeyframeBody body(h, Frames{mesh.positions, mesh.positions});
+  body.setTime(0.5);
+  for (const double t : {std::numeric_limits<double>::quiet_NaN(), std::numeric_limits<double>::infinity()})
+    CHECK_THROWS_WITH(body.setTime(t), Catch::Contains("is not finite"));
+  CHECK(body.time() == 0.5);
+  body.setTime(7);
+  CHECK(body.time() == 1);
 }
 
 // A null hierarchy is refused by every body, not dereferenced.
@@ -850,6 +858,34 @@ TEST_CASE("bodies: a null hierarchy throws", "[deform]") {
   CHECK_THROWS_WITH(RigidBody(none), Catch::Contains("null hierarchy"));
   CHECK_THROWS_WITH(DeformingBody(none), Catch::Contains("null hierarchy"));
   CHECK_THROWS_WITH(KeyframeBody(none, {scenes::icosphere(1).positions}), Catch::Contains("null hierarchy"));
+}
+
+// A stream reads a geometry with its own hierarchy's layout: another hierarchy's geometry is
+// refused (found by review: out-of-range reads, or triangles of the other mesh), even one built
+// from the same mesh, as is a rigid body's query on another hierarchy's stream.
+TEST_CASE("bodies: a stream on another hierarchy is refused", "[deform]") {
+  const auto big = Hierarchy::build(scenes::icosphere(3));
+  const auto small = Hierarchy::build(scenes::icosphere(1));
+  const auto same_mesh = Hierarchy::build(scenes::icosphere(3));
+  DeformingBody deforming(big);
+  KeyframeBody keyframed(small, {small->mesh().positions});
+  QueryStream on_small(small), on_big(big), on_same(same_mesh);
+  CHECK_THROWS_WITH(on_small.setGeometry(&deforming.geometry()), Catch::Contains("another hierarchy"));
+  CHECK_THROWS_WITH(on_big.setGeometry(&keyframed.geometry()), Catch::Contains("another hierarchy"));
+  CHECK_THROWS_WITH(on_same.setGeometry(&deforming.geometry()), Catch::Contains("another hierarchy"));
+  const TreeGeometry rest = small->restGeometry();
+  CHECK_THROWS_AS(on_big.setGeometry(&rest), std::invalid_argument);
+  // Its own geometries are taken, and answer what brute force does.
+  on_big.setGeometry(&deforming.geometry());
+  on_small.setGeometry(&keyframed.geometry());
+  const Vec3 p(0.3, -0.2, 1.4);
+  CHECK(on_big.closest(p).distance == bruteForceClosest(big->mesh(), p).distance);
+  CHECK(on_small.closest(p).distance == bruteForceClosest(small->mesh(), p).distance);
+  on_small.setGeometry(nullptr);
+  const RigidBody rigid(big);
+  CHECK_THROWS_WITH(rigid.closest(on_small, p), Catch::Contains("another hierarchy"));
+  CHECK_THROWS_WITH(rigid.closestCoherent(on_same, p), Catch::Contains("another hierarchy"));
+  CHECK(rigid.closest(on_big, p).distance == bruteForceClosest(big->mesh(), p).distance);
 }
 
 TEST_CASE("inflated bounds: displacements within the bounds are exact, others refused", "[deform][inflated]") {
