@@ -1077,6 +1077,27 @@ std::vector<PositionsUpdate> DistanceService::setPositions(const std::vector<Bod
   if (repeated != slots.end())
     throw std::invalid_argument("DistanceService::setPositions: body " + std::to_string(*repeated) +
                                 " appears twice in the batch");
+  // The bodies commit in parallel: an entry whose positions are a batch body's own vectors
+  // (positions(other) of a deforming body) would read them while that body changes them. Such
+  // entries are copied first, so every entry sees the positions as they were before the call.
+  std::vector<const std::vector<Vec3>*> inputs(batch.size());
+  std::vector<const std::vector<Vec3>*> owned;
+  for (const Body* t : targets) {
+    owned.push_back(&t->world_positions);
+    owned.push_back(&t->local_positions);
+    owned.push_back(&t->deforming->positions());
+  }
+  const std::less<const std::vector<Vec3>*> before;  // a total order on unrelated pointers
+  std::sort(owned.begin(), owned.end(), before);
+  std::vector<std::vector<Vec3>> copies;
+  copies.reserve(batch.size());
+  for (size_t i = 0; i < batch.size(); ++i) {
+    inputs[i] = batch[i].positions;
+    if (std::binary_search(owned.begin(), owned.end(), inputs[i], before)) {
+      copies.push_back(*inputs[i]);
+      inputs[i] = &copies.back();
+    }
+  }
   std::vector<PositionsUpdate> updates(batch.size());
   impl_->arena->execute([&] {
     // Coordinates, plans and extent first (changing nothing but the bodies' scratch), so an
@@ -1090,12 +1111,12 @@ std::vector<PositionsUpdate> DistanceService::setPositions(const std::vector<Bod
       return ok;
     };
     tbb::parallel_for(size_t{0}, batch.size(), [&](size_t i) {
-      if (!inRange(*batch[i].positions)) {
+      if (!inRange(*inputs[i])) {
         problem[i] = " has a non-finite position or one beyond 1e150 in magnitude";
         return;
       }
-      plans[i] = impl_->planPositions(*targets[i], *batch[i].positions);
-      const std::vector<Vec3>& held = plans[i].framed ? targets[i]->local_positions : *batch[i].positions;
+      plans[i] = impl_->planPositions(*targets[i], *inputs[i]);
+      const std::vector<Vec3>& held = plans[i].framed ? targets[i]->local_positions : *inputs[i];
       if (plans[i].framed && !inRange(held))
         problem[i] = " has a position beyond 1e150 in magnitude in the body's frame";
       else if (!(positionsDiagonal(held) <= kMaxMeshSize))
@@ -1104,7 +1125,7 @@ std::vector<PositionsUpdate> DistanceService::setPositions(const std::vector<Bod
     for (size_t i = 0; i < batch.size(); ++i)
       if (problem[i]) throw error(i, problem[i]);
     tbb::parallel_for(size_t{0}, batch.size(), [&](size_t i) {
-      updates[i] = impl_->commitPositions(*targets[i], *batch[i].positions, plans[i]);
+      updates[i] = impl_->commitPositions(*targets[i], *inputs[i], plans[i]);
     });
   });
   return updates;
@@ -1161,7 +1182,26 @@ void DistanceService::step(PointsRef points, double max_distance, QueryMode mode
     throw std::invalid_argument("DistanceService::step: unknown query mode " +
                                 std::to_string(static_cast<int>(mode)));
   Impl& m = *impl_;
-  m.removed_states = false;  // this step's alignStates() drops them (see remove())
+  try {
+    stepInto(points, max_distance, mode, out);
+  } catch (...) {
+    // Out of memory (or a thread's exception): the result is left empty, not half-written (a
+    // within step's hits are swapped out while it runs, found by review), and a removed body's
+    // states still count as removed until a step completes.
+    out.mode_ = QueryMode::kClosest;
+    out.status_.clear();
+    out.count_.clear();
+    out.begin_.clear();
+    out.hits_.clear();
+    out.block_hits_.clear();
+    out.stats_ = {};
+    throw;
+  }
+  m.removed_states = false;  // this step's alignStates() dropped them (see remove())
+}
+
+void DistanceService::stepInto(PointsRef points, double max_distance, QueryMode mode, StepResult& out) {
+  Impl& m = *impl_;
   auto start = std::chrono::steady_clock::now();
   const uint32_t refreshed = m.refreshBoxes();
   const double bounds_seconds = secondsSince(start);
@@ -1238,6 +1278,12 @@ void DistanceService::step(PointsRef points, double max_distance, QueryMode mode
 }
 
 void DistanceService::setThreads(unsigned threads) {
+  // TBB takes any count and crashed or ran out of memory at the next step past about 1e7 (found
+  // by review): far beyond any machine, so refused.
+  constexpr unsigned kMaxThreads = 1u << 16;
+  if (threads > kMaxThreads)
+    throw std::invalid_argument("DistanceService: threads must be at most " + std::to_string(kMaxThreads) +
+                                " (0: TBB's default), got " + std::to_string(threads));
   impl_->threads = threads;
   impl_->arena = std::make_unique<tbb::task_arena>(threads == 0 ? static_cast<int>(tbb::task_arena::automatic)
                                                                  : static_cast<int>(threads));

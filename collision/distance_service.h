@@ -283,7 +283,9 @@ class DistanceService {
   // each entry (result i for entry i), the bodies updated in parallel on the service's threads.
   // Every entry is checked before any body changes (std::invalid_argument for a stale handle, a
   // body that is not deforming or appears twice, a null or wrong-sized positions vector, a
-  // non-finite coordinate): on an error no body of the batch has changed.
+  // non-finite coordinate, positions spanning more than 1e50): on an error no body of the batch
+  // has changed. Every entry reads its positions as they were before the call, even where they
+  // are another batch body's positions() (those are copied first; the bodies change at once).
   std::vector<PositionsUpdate> setPositions(const std::vector<BodyPositions>& batch);
   // kDeforming: changes the displacement bound and re-anchors at the current positions.
   void setDisplacementBound(BodyHandle body, double displacement_bound);
@@ -305,11 +307,13 @@ class DistanceService {
   // within the distance; a hit on the surface up to rounding (see DistanceHit::direction)
   // counts as within any max_distance, 0 included, with its distance as computed. Points with a NaN or infinite coordinate get PointStatus::kNotFinite,
   // finite ones beyond 1e150 kOutOfRange, and no hits (the step goes on). Throws std::invalid_argument if max_distance is NaN or negative.
-  // Results are written into `out` (its memory reused).
+  // Results are written into `out` (its memory reused); if the step throws (out of memory), `out`
+  // is left empty (size() 0); the service stays usable and the next step answers exactly.
   void step(PointsRef points, double max_distance, QueryMode mode, StepResult& out);
   StepResult step(PointsRef points, double max_distance, QueryMode mode = QueryMode::kClosest);
 
-  // Threads used by step(): 0 = TBB's default. Results do not depend on it.
+  // Threads used by step(): 0 = TBB's default; at most 65536 (std::invalid_argument beyond,
+  // the service unchanged; ServiceOptions::threads too). Results do not depend on it.
   void setThreads(unsigned threads);
   unsigned threads() const;
 
@@ -323,6 +327,7 @@ class DistanceService {
  private:
   struct Impl;
   std::unique_ptr<Impl> impl_;
+  void stepInto(PointsRef points, double max_distance, QueryMode mode, StepResult& out);
 };
 
 }  // namespace meshsweeper

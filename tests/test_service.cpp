@@ -1438,6 +1438,49 @@ TEST_CASE("remove drops the body's coherent states", "[service]") {
   CHECK(service.coherentStateBytes() < 1024);  // the blocks' offsets only (was 40 pairs' states)
 }
 
+// A step that runs out of memory (here: a batch claiming 2^61 points over a small buffer, whose
+// result cannot be allocated) leaves an empty result, not a within-mode result without its hits,
+// and a removed body's states still count as removed (found by review). Skipped under the
+// sanitizers, whose allocators stop the program on such a request instead of throwing.
+#if !defined(__SANITIZE_ADDRESS__) && !defined(__SANITIZE_THREAD__)
+TEST_CASE("a step that runs out of memory leaves an empty result and the service usable", "[service][errors]") {
+  const Mesh sphere = scenes::icosphere(2);
+  DistanceService service(ServiceOptions{2, 8});
+  const auto hierarchy = service.hierarchyFor(sphere);
+  const BodyHandle a = service.addRigid(hierarchy);
+  const BodyHandle b = service.addRigid(hierarchy, makePose(0, Vec3::UnitZ(), Vec3(1.5, 0, 0)));
+  std::vector<Vec3> points;
+  for (int i = 0; i < 40; ++i) points.push_back(Vec3(-0.5 + 0.06 * i, 1.05, 0.0));
+  StepResult result;
+  service.step(toMatrix(points), 0.3, QueryMode::kClosest, result);
+  const size_t pairs = result.stats().pairs;
+  REQUIRE(pairs > 40);
+  service.remove(b);
+  const size_t kept = service.coherentStates();
+  REQUIRE(kept < pairs);
+  const PointMatrix few = toMatrix(points);
+  const Eigen::Map<const PointMatrix> claimed(few.data(), Eigen::Index{1} << 61, 3);
+  for (QueryMode mode : {QueryMode::kWithin, QueryMode::kClosest}) {
+    CHECK_THROWS_AS(service.step(claimed, 0.3, mode, result), std::bad_alloc);
+    CHECK(result.size() == 0);
+    CHECK(service.coherentStates() == kept);
+  }
+  service.step(toMatrix(points), 0.3, QueryMode::kWithin, result);
+  REQUIRE(result.size() == points.size());
+  for (size_t i = 0; i < points.size(); ++i) {
+    const auto expected = bruteForceClosest(sphere, points[i]);
+    const StepResult::Hits hits = result.hits(i);
+    if (expected.distance <= 0.3) {
+      REQUIRE(!hits.empty());
+      CHECK(hits[0].body == a);
+      CHECK(hits[0].distance == Approx(expected.distance).epsilon(1e-12));
+    } else {
+      CHECK(hits.empty());
+    }
+  }
+}
+#endif
+
 // Answers never depend on the coherence tuning or history: points held over vertices and edge
 // midpoints of a grid (equidistant from several faces) get the same triangle, feature and
 // barycentric coordinates whatever reach_steps and lead_steps are, and after the states are
@@ -1494,6 +1537,70 @@ TEST_CASE("a setPositions that throws changes nothing, inline faces included", "
   CHECK_THROWS_WITH(service.setPositions(body, bad), Catch::Contains("beyond 1e150"));
   CHECK(service.inlineFaces(body));
   CHECK(service.positions(body) == sphere.positions);
+}
+
+// Found by review: the batch's check measured the positions' span with a stable norm, the body
+// with a plain one, so positions spanning 1e50 by one and just beyond it by the other passed the
+// check and threw in the commit, after another body of the batch had changed. And the bodies
+// commit in parallel, so an entry naming another batch body's positions() read them while they
+// changed (a torn mix).
+TEST_CASE("batched setPositions: one measure of the span; entries may name a batch body's positions", "[service][errors]") {
+  Mesh tet;
+  tet.positions = {Vec3(0, 0, 0), Vec3(1, 0, 0), Vec3(0, 1, 0), Vec3(0, 0, 1)};
+  tet.triangles = {{0, 2, 1}, {0, 1, 3}, {0, 3, 2}, {1, 2, 3}};
+  const Mesh sphere = scenes::icosphere(4);
+  // stableNorm() of this span is 1e50 (allowed), its plain norm() 1e50 plus 2 ulps.
+  const Vec3 span(9.0213548867977069e+49, 3.2780074915268003e+49, 2.8053204615418427e+49);
+  REQUIRE(span.stableNorm() <= 1e50);
+  REQUIRE(span.norm() > 1e50);
+  DistanceService service(ServiceOptions{2, 64});
+  const std::vector<Vec3> huge = {Vec3::Zero(), span, Vec3(span.x(), 0, 0), Vec3(0, span.y(), span.z())};
+  const BodyHandle big = service.addDeforming(service.hierarchyFor(tet), 1.0, huge);
+  const BodyHandle soft = service.addDeforming(service.hierarchyFor(sphere), 0.1);
+  CHECK_NOTHROW(service.setPositions(big, huge));
+  std::vector<Vec3> moved = sphere.positions;
+  for (Vec3& x : moved) x.x() += 0.05;
+  CHECK_NOTHROW(service.setPositions({{soft, &moved}, {big, &huge}}));
+  CHECK(service.positions(soft) == moved);
+  // Beyond 1e50 by both measures: refused by the check, the other body unchanged.
+  std::vector<Vec3> beyond = huge;
+  for (Vec3& x : beyond) x *= 1.0 + 1e-12;
+  CHECK_THROWS_WITH(service.setPositions({{soft, &sphere.positions}, {big, &beyond}}), Catch::Contains("1e50"));
+  CHECK(service.positions(soft) == moved);
+  CHECK(service.positions(big) == huge);
+
+  // Aliasing: a takes b's positions as they were before the call while b changes.
+  DistanceService aliased(ServiceOptions{2, 64, 2.0, 3.0, false});
+  const auto hierarchy = aliased.hierarchyFor(sphere);
+  const BodyHandle a = aliased.addDeforming(hierarchy, 10.0), b = aliased.addDeforming(hierarchy, 10.0);
+  for (int round = 0; round < 10; ++round) {
+    INFO("round " << round);
+    std::vector<Vec3> next_b = sphere.positions;
+    for (Vec3& x : next_b) x *= 1.5 + 0.1 * round;
+    const std::vector<Vec3> old_b = aliased.positions(b);
+    aliased.setPositions({{b, &next_b}, {a, &aliased.positions(b)}});
+    CHECK(aliased.positions(b) == next_b);
+    CHECK(aliased.positions(a) == old_b);
+    // And an entry naming its own body's positions keeps them.
+    aliased.setPositions({{a, &aliased.positions(a)}, {b, &aliased.positions(a)}});
+    CHECK(aliased.positions(a) == old_b);
+    CHECK(aliased.positions(b) == old_b);
+  }
+}
+
+TEST_CASE("thread counts beyond 65536 are refused", "[service][errors]") {
+  CHECK_THROWS_WITH(DistanceService(ServiceOptions{70000}), Catch::Contains("at most 65536"));
+  const Mesh sphere = scenes::icosphere(2);
+  DistanceService service(ServiceOptions{1});
+  service.addRigid(service.hierarchyFor(sphere));
+  for (unsigned threads : {65537u, 10000000u, 0xffffffffu})
+    CHECK_THROWS_WITH(service.setThreads(threads), Catch::Contains("at most 65536"));
+  CHECK(service.threads() == 1);
+  const StepResult result = service.step(toMatrix({Vec3(2, 0, 0)}), 5.0);
+  REQUIRE(result.closest(0));
+  CHECK(result.closest(0)->distance == Approx(1.0).epsilon(0.01));
+  service.setThreads(2);
+  CHECK(service.threads() == 2);
 }
 
 // A deforming body carried across the world by a rigid motion, with points that travel along:
