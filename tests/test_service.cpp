@@ -1407,15 +1407,26 @@ TEST_CASE("points beyond 1e150 are out of range; farther ones within it are answ
   }
 }
 
-// remove() drops the removed body's coherent states; the next step frees their memory.
-TEST_CASE("remove drops the body's coherent states", "[service]") {
+// Two unit spheres 1.5 apart (rigid bodies a and b) and 40 points along a line above them,
+// near a, b or both (within 0.3).
+struct TwoSpheres {
   const Mesh sphere = scenes::icosphere(2);
-  DistanceService service(ServiceOptions{2, 8});
-  const auto hierarchy = service.hierarchyFor(sphere);
+  DistanceService service{ServiceOptions{2, 8}};
+  const std::shared_ptr<const Hierarchy> hierarchy = service.hierarchyFor(sphere);
   const BodyHandle a = service.addRigid(hierarchy);
   const BodyHandle b = service.addRigid(hierarchy, makePose(0, Vec3::UnitZ(), Vec3(1.5, 0, 0)));
   std::vector<Vec3> points;
-  for (int i = 0; i < 40; ++i) points.push_back(Vec3(-0.5 + 0.06 * i, 1.05, 0.0));  // near a, b or both
+  TwoSpheres() {
+    for (int i = 0; i < 40; ++i) points.push_back(Vec3(-0.5 + 0.06 * i, 1.05, 0.0));
+  }
+};
+
+// remove() drops the removed body's coherent states; the next step frees their memory.
+TEST_CASE("remove drops the body's coherent states", "[service]") {
+  TwoSpheres scene;
+  DistanceService& service = scene.service;
+  const BodyHandle a = scene.a, b = scene.b;
+  const std::vector<Vec3>& points = scene.points;
   const StepResult r = service.step(toMatrix(points), 0.3);
   const size_t pairs = r.stats().pairs;
   size_t pairs_of_b = 0;
@@ -1444,18 +1455,14 @@ TEST_CASE("remove drops the body's coherent states", "[service]") {
 // sanitizers, whose allocators stop the program on such a request instead of throwing.
 #if !defined(__SANITIZE_ADDRESS__) && !defined(__SANITIZE_THREAD__)
 TEST_CASE("a step that runs out of memory leaves an empty result and the service usable", "[service][errors]") {
-  const Mesh sphere = scenes::icosphere(2);
-  DistanceService service(ServiceOptions{2, 8});
-  const auto hierarchy = service.hierarchyFor(sphere);
-  const BodyHandle a = service.addRigid(hierarchy);
-  const BodyHandle b = service.addRigid(hierarchy, makePose(0, Vec3::UnitZ(), Vec3(1.5, 0, 0)));
-  std::vector<Vec3> points;
-  for (int i = 0; i < 40; ++i) points.push_back(Vec3(-0.5 + 0.06 * i, 1.05, 0.0));
+  TwoSpheres scene;
+  DistanceService& service = scene.service;
+  const std::vector<Vec3>& points = scene.points;
   StepResult result;
   service.step(toMatrix(points), 0.3, QueryMode::kClosest, result);
   const size_t pairs = result.stats().pairs;
   REQUIRE(pairs > 40);
-  service.remove(b);
+  service.remove(scene.b);
   const size_t kept = service.coherentStates();
   REQUIRE(kept < pairs);
   const PointMatrix few = toMatrix(points);
@@ -1468,11 +1475,11 @@ TEST_CASE("a step that runs out of memory leaves an empty result and the service
   service.step(toMatrix(points), 0.3, QueryMode::kWithin, result);
   REQUIRE(result.size() == points.size());
   for (size_t i = 0; i < points.size(); ++i) {
-    const auto expected = bruteForceClosest(sphere, points[i]);
+    const auto expected = bruteForceClosest(scene.sphere, points[i]);
     const StepResult::Hits hits = result.hits(i);
     if (expected.distance <= 0.3) {
       REQUIRE(!hits.empty());
-      CHECK(hits[0].body == a);
+      CHECK(hits[0].body == scene.a);
       CHECK(hits[0].distance == Approx(expected.distance).epsilon(1e-12));
     } else {
       CHECK(hits.empty());
