@@ -15,6 +15,7 @@
 #include <random>
 #include <sstream>
 #include <stdexcept>
+#include <unordered_set>
 
 namespace meshsweeper {
 namespace {
@@ -133,8 +134,89 @@ std::vector<Vec3> bandPoints(const Mesh& mesh, size_t n, double max_offset, uint
 
 namespace {
 
+// OpenVDB keeps a grid in leaf nodes of 8^3 voxels, and meshToVolume builds several grids of
+// them: its memory goes by the leaves the narrow band touches, not by the band's voxels (a
+// needle's band fills few voxels of each leaf along it). This counts the leaf-sized cells the
+// band reaches: each triangle is sampled in rows parallel to its longest edge, a quarter of a
+// cell apart along and across them (work in proportion to its area and length in cells, a
+// needle's or a cap's too), the cells of the samples are marked, and those are grown by the
+// band's reach plus the samples' spacing. It stops as soon as the count passes `limit`
+// (returning a count above it), so its memory stays within about `limit` cells.
+size_t bandLeafCells(const Mesh& mesh, double voxel, double half_width, size_t limit) {
+  const double cell = 8 * voxel;
+  Vec3 lower, upper;
+  meshBounds(mesh, lower, upper);
+  const Vec3 origin = (lower + upper) / 2;
+  // Cells are indexed from the mesh's centre; past 2^20 cells on an axis the count is over
+  // any limit anyway (a 2^40-cell slab).
+  constexpr double kMaxIndex = 1 << 20;
+  if (!(((upper - lower) / cell).maxCoeff() < kMaxIndex)) return limit + 1;
+  auto key = [](int64_t i, int64_t j, int64_t k) {
+    return (static_cast<uint64_t>(i + (1 << 21)) << 42) | (static_cast<uint64_t>(j + (1 << 21)) << 21) |
+           static_cast<uint64_t>(k + (1 << 21));
+  };
+  std::unordered_set<uint64_t> core;
+  auto mark = [&](const Vec3& x) {
+    core.insert(key(static_cast<int64_t>(std::floor(x.x())), static_cast<int64_t>(std::floor(x.y())),
+                    static_cast<int64_t>(std::floor(x.z()))));
+  };
+  constexpr double kSpacing = 0.25;  // cells
+  for (const Triangle& t : mesh.triangles) {
+    Vec3 a = (mesh.positions[t[0]] - origin) / cell, b = (mesh.positions[t[1]] - origin) / cell,
+         c = (mesh.positions[t[2]] - origin) / cell;
+    // a-b the longest edge, c opposite it.
+    const double ab = (b - a).squaredNorm(), bc = (c - b).squaredNorm(), ca = (a - c).squaredNorm();
+    if (bc > ab && bc >= ca) std::swap(a, c);
+    else if (ca > ab && ca > bc) std::swap(b, c);
+    const double length = (b - a).norm();
+    const double height = length > 0 ? (b - a).cross(c - a).norm() / length : 0;
+    const int64_t rows = static_cast<int64_t>(std::ceil(height / kSpacing));
+    for (int64_t row = 0; row <= rows; ++row) {
+      const double s = rows ? static_cast<double>(row) / static_cast<double>(rows) : 0;
+      const Vec3 from = a + s * (c - a), to = b + s * (c - b);
+      const int64_t steps = static_cast<int64_t>(std::ceil((1 - s) * length / kSpacing));
+      for (int64_t step = 0; step <= steps; ++step)
+        mark(steps ? from + (static_cast<double>(step) / static_cast<double>(steps)) * (to - from) : from);
+      if (core.size() > limit) return core.size();
+    }
+  }
+  // Grown by the band's reach, in whole cells on each axis: a point of the surface lies within
+  // sqrt(2)/4 of a cell of a sample (0.36).
+  const int64_t reach = static_cast<int64_t>(std::ceil(half_width / 8 + 0.36));
+  const double per_cell = std::pow(2.0 * static_cast<double>(reach) + 1, 3);
+  if (static_cast<double>(core.size()) * per_cell > 64.0 * static_cast<double>(limit)) {
+    // Too much work to count exactly: the box of the core cells, grown, bounds the count.
+    int64_t lo[3] = {INT64_MAX, INT64_MAX, INT64_MAX}, hi[3] = {INT64_MIN, INT64_MIN, INT64_MIN};
+    for (uint64_t c : core) {
+      const int64_t idx[3] = {static_cast<int64_t>(c >> 42), static_cast<int64_t>((c >> 21) & 0x1fffff),
+                              static_cast<int64_t>(c & 0x1fffff)};
+      for (int a = 0; a < 3; ++a) {
+        lo[a] = std::min(lo[a], idx[a]);
+        hi[a] = std::max(hi[a], idx[a]);
+      }
+    }
+    double box = 1;
+    for (int a = 0; a < 3; ++a) box *= static_cast<double>(hi[a] - lo[a] + 1 + 2 * reach);
+    if (box <= static_cast<double>(limit)) return static_cast<size_t>(box);
+    return limit + 1;  // refused: a band this wide around this much surface is beyond the limit anyway
+  }
+  std::unordered_set<uint64_t> band;
+  for (uint64_t c : core) {
+    const int64_t i0 = static_cast<int64_t>(c >> 42) - (1 << 21), j0 = static_cast<int64_t>((c >> 21) & 0x1fffff) - (1 << 21),
+                  k0 = static_cast<int64_t>(c & 0x1fffff) - (1 << 21);
+    for (int64_t i = i0 - reach; i <= i0 + reach; ++i)
+      for (int64_t j = j0 - reach; j <= j0 + reach; ++j)
+        for (int64_t k = k0 - reach; k <= k0 + reach; ++k) {
+          band.insert(key(i, j, k));
+          if (band.size() > limit) return band.size();
+        }
+  }
+  return band.size();
+}
+
 // The voxel size of a check (given, or 1/256 of the diagonal); throws MeshError, naming the
-// mesh, when none can be derived or the narrow band would need more than 2e8 voxels.
+// mesh, when none can be derived, when the band's points would leave the coordinate range, or
+// when the narrow band would touch more than kMaxBandLeaves leaf nodes of OpenVDB.
 double checkVoxel(const Mesh& mesh, const VdbCheckOptions& options) {
   const std::string problem = checkMesh(mesh);
   if (!problem.empty()) throw MeshError(problem);
@@ -142,11 +224,27 @@ double checkVoxel(const Mesh& mesh, const VdbCheckOptions& options) {
   if (!(voxel > 0) || !std::isfinite(voxel))
     throw MeshError(mesh.name + ": the mesh has no extent (its vertices coincide), so no voxel size follows "
                                 "from it; give one");
-  const double voxels = (surfaceArea(mesh) / (voxel * voxel) + 1) * 2 * std::max(options.half_width, 1.0);
-  if (voxels > 2e8) {
+  const double half_width = std::max(options.half_width, 1.0);
+  Vec3 lower, upper;
+  meshBounds(mesh, lower, upper);
+  const double reach = lower.cwiseAbs().cwiseMax(upper.cwiseAbs()).maxCoeff() + (half_width + 1) * voxel;
+  if (!(reach <= kMaxCoordinate)) {
     std::ostringstream out;
-    out << mesh.name << ": a voxel of " << voxel << " would need about " << voxels
-        << " voxels in the narrow band (at most 2e8): choose a larger voxel";
+    out << mesh.name << ": a voxel of " << voxel << " and a band of " << half_width
+        << " voxels reach beyond the coordinate range 1e150: choose a smaller voxel or a narrower band";
+    throw MeshError(out.str());
+  }
+  // Measured (OpenVDB 10, peak resident memory of `meshsweep check` over the leaves counted
+  // here, which overestimates a surface's about 3 times and a needle's hardly): 4-5 KB a leaf
+  // on bunny00 at voxels of 0.001 and 0.0005 (0.8 and 2.7 GB), 8-11 KB on a needle at 1e-5 and
+  // 1e-6 (1 and 8 GB). 400,000 leaves: at most about 4.4 GB.
+  constexpr size_t kMaxBandLeaves = 400'000;
+  const size_t leaves = bandLeafCells(mesh, voxel, half_width, kMaxBandLeaves);
+  if (leaves > kMaxBandLeaves) {
+    std::ostringstream out;
+    out << mesh.name << ": a voxel of " << voxel << " and a band of " << half_width
+        << " voxels would touch more than " << kMaxBandLeaves
+        << " of OpenVDB's 8^3-voxel leaf nodes (about 4 GB): choose a larger voxel or a narrower band";
     throw MeshError(out.str());
   }
   return voxel;
@@ -179,6 +277,7 @@ VdbCheckReport vdbCheck(const Mesh& mesh, const std::vector<Vec3>& points, const
     double vdb = 0;
     if (!p.allFinite() || !grid.sample(p, vdb)) continue;
     const ClosestPoint c = stream.closest(p);
+    if (!std::isfinite(c.distance)) continue;  // beyond the query range: not compared
     const double error = std::abs(std::abs(vdb) - c.distance) / voxel;
     ++report.compared;
     sum += error;

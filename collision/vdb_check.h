@@ -95,8 +95,10 @@ struct VdbCheckReport {
 std::vector<Vec3> bandPoints(const Mesh& mesh, size_t n, double max_offset, uint64_t seed);
 
 // Compares OpenVDB's grid with the exact distances (and signs) at `points`. Throws MeshError
-// (naming the mesh) for an invalid mesh, a mesh with no extent and no voxel size given, or a
-// voxel so small that the narrow band would need more than 2e8 voxels.
+// (naming the mesh) for an invalid mesh, a mesh with no extent and no voxel size given, a
+// voxel and band whose narrow band would touch more than 400,000 of OpenVDB's 8^3-voxel leaf
+// nodes (about 4 GB; counted from the triangles, so a needle counts by its length), or that
+// reach beyond the coordinate range (1e150).
 VdbCheckReport vdbCheck(const Mesh& mesh, const std::vector<Vec3>& points, const VdbCheckOptions& options);
 // The same at options.points bandPoints() within (half_width - 1.5) voxels of the surface.
 VdbCheckReport vdbCheck(const Mesh& mesh, const VdbCheckOptions& options = {});

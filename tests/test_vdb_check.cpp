@@ -136,3 +136,32 @@ TEST_CASE("VdbDistanceGrid rejects bad parameters", "[vdb]") {
   CHECK_THROWS_AS(VdbDistanceGrid(sphere, 0.1, 0.5, true), std::invalid_argument);
   CHECK_THROWS_AS(VdbDistanceGrid(Mesh{}, 0.1, 3, true), MeshError);
 }
+
+// The band's leaf nodes are counted from the triangles before OpenVDB builds anything (found by
+// review: a needle's band passed an area-based estimate as 9 voxels and took 8 GB at a voxel of
+// 1e-6; a voxel of 1e160 put the points beyond the query range and printed a perfect score).
+TEST_CASE("vdbCheck refuses bands beyond memory or the coordinate range, naming the mesh", "[vdb]") {
+  Mesh needle;
+  needle.name = "needle.off";
+  needle.positions = {Vec3(0, 0, 0), Vec3(1, 0, 0), Vec3(1, 1e-12, 0)};
+  needle.triangles = {{0, 1, 2}};
+  VdbCheckOptions options;
+  options.points = 50;
+  options.voxel_size = 1e-6;  // 125,000 leaves along it, grown by the band: refused
+  CHECK_THROWS_WITH(vdbCheck(needle, options), Catch::Contains("needle.off") && Catch::Contains("leaf nodes"));
+  options.voxel_size = 1e-3;  // 1,000 voxels along it: checked
+  const VdbCheckReport fine = vdbCheck(needle, options);
+  CHECK(fine.compared > 0);
+  CHECK(fine.max_error_voxels <= kMaxErrorVoxels);
+
+  Mesh sphere = scenes::icosphere(2);
+  sphere.name = "sphere";
+  options.voxel_size = 0;  // 1/256 of the diagonal
+  options.half_width = 1000;
+  CHECK_THROWS_WITH(vdbCheck(sphere, options), Catch::Contains("sphere") && Catch::Contains("narrower band"));
+  options.half_width = 3;
+  options.voxel_size = 1e160;
+  CHECK_THROWS_WITH(vdbCheck(sphere, options), Catch::Contains("beyond the coordinate range"));
+  options.voxel_size = 0;
+  CHECK(vdbCheck(sphere, options).compared > 0);
+}

@@ -58,9 +58,13 @@ int runCheck(int argc, char** argv, int first) {
   std::printf("mean disagreement: %.4f voxels\n", r.mean_error_voxels);
   if (r.signed_grid) {
     std::printf("sign agreement: %.4f%% (%zu of %zu)\n", 100 * r.signAgreement(), r.sign_agreed, r.sign_compared);
-    std::printf("sign agreement beyond one voxel: %.4f%% (%zu of %zu)\n",
-                r.sign_compared_far ? 100.0 * double(r.sign_agreed_far) / double(r.sign_compared_far) : 100.0,
-                r.sign_agreed_far, r.sign_compared_far);
+    // No point a voxel out (a band of 2) is no agreement either (found by review: it printed 100%).
+    if (r.sign_compared_far)
+      std::printf("sign agreement beyond one voxel: %.4f%% (%zu of %zu)\n",
+                  100.0 * double(r.sign_agreed_far) / double(r.sign_compared_far), r.sign_agreed_far,
+                  r.sign_compared_far);
+    else
+      std::printf("sign agreement beyond one voxel: n/a (no point compared lies a voxel or more from the surface)\n");
   } else {
     std::printf("sign agreement: n/a (%s)\n", r.closed ? "--unsigned" : "open mesh: unsigned grid");
   }

@@ -301,6 +301,18 @@ same_files(ties_plain.csv ties_front.csv)
 
 # The summary's certified interval is printed rounded outward: h(quad -> point (3, 1, 2)) is
 # sqrt(14) = 3.74165738..., so its upper bound prints as 3.741658, not 3.741657.
+# check: a band OpenVDB cannot hold is refused before anything is built, naming the mesh (found
+# by review: a needle at a voxel of 1e-6 ran out of memory and aborted; a voxel of 1e160 printed
+# a perfect score); with no point a voxel out, the sign beyond one voxel is n/a, not 100%.
+file(WRITE "${WORK_DIR}/needle.off" "OFF\n3 1 0\n0 0 0\n1 0 0\n1 1e-12 0\n3 0 1 2\n")
+file(WRITE "${WORK_DIR}/tetra.off" "OFF\n4 4 0\n0 0 0\n1 0 0\n0 1 0\n0 0 1\n3 0 2 1\n3 0 1 3\n3 0 3 2\n3 1 2 3\n")
+check(check_needle_fine RC 1 ARGS check needle.off --voxel 1e-6 ERR "needle.off" "leaf nodes" "choose a larger voxel")
+check(check_band_huge RC 1 ARGS check tetra.off --band 1000 ERR "tetra.off" "leaf nodes" "narrower band")
+check(check_voxel_huge RC 1 ARGS check tetra.off --voxel 1e160 ERR "tetra.off" "beyond the coordinate range")
+check(check_band_two RC 0 ARGS check tetra.off --band 2 --points 200
+      OUT "sign agreement beyond one voxel: n/a" NOT_OUT "100.0000% (0 of 0)")
+check(check_needle RC 0 ARGS check needle.off --voxel 1e-3 --points 200 OUT "max disagreement")
+
 file(WRITE "${WORK_DIR}/point.off" "OFF\n3 1 0\n3 1 2\n3 1 2\n3 1 2\n3 0 1 2\n")
 check(hausdorff_outward RC 0 ARGS hausdorff quad.off point.off
   OUT "Hausdorff distance in [3.741657, 3.741658]" "B -> A  max in [2.828427, 2.828428]"
