@@ -142,18 +142,23 @@ namespace {
 // needle's or a cap's too), the cells of the samples are marked, and those are grown by the
 // band's reach plus the samples' spacing. It stops as soon as the count passes `limit`
 // (returning a count above it), so its memory stays within about `limit` cells.
-size_t bandLeafCells(const Mesh& mesh, double voxel, double half_width, size_t limit) {
+size_t bandLeafCells(const Mesh& mesh, const Vec3& lower, const Vec3& upper, double voxel, double half_width,
+                     size_t limit) {
   const double cell = 8 * voxel;
-  Vec3 lower, upper;
-  meshBounds(mesh, lower, upper);
   const Vec3 origin = (lower + upper) / 2;
   // Cells are indexed from the mesh's centre; past 2^20 cells on an axis the count is over
   // any limit anyway (a 2^40-cell slab).
   constexpr double kMaxIndex = 1 << 20;
   if (!(((upper - lower) / cell).maxCoeff() < kMaxIndex)) return limit + 1;
+  // A cell's key: its three indices, offset by 2^21, in 21 bits each.
+  constexpr int64_t kOffset = int64_t{1} << 21;
   auto key = [](int64_t i, int64_t j, int64_t k) {
-    return (static_cast<uint64_t>(i + (1 << 21)) << 42) | (static_cast<uint64_t>(j + (1 << 21)) << 21) |
-           static_cast<uint64_t>(k + (1 << 21));
+    return (static_cast<uint64_t>(i + kOffset) << 42) | (static_cast<uint64_t>(j + kOffset) << 21) |
+           static_cast<uint64_t>(k + kOffset);
+  };
+  auto indices = [](uint64_t key, int64_t out[3]) {
+    for (int axis = 0; axis < 3; ++axis)
+      out[axis] = static_cast<int64_t>((key >> (42 - 21 * axis)) & (kOffset - 1)) - kOffset;
   };
   std::unordered_set<uint64_t> core;
   auto mark = [&](const Vec3& x) {
@@ -188,8 +193,8 @@ size_t bandLeafCells(const Mesh& mesh, double voxel, double half_width, size_t l
     // Too much work to count exactly: the box of the core cells, grown, bounds the count.
     int64_t lo[3] = {INT64_MAX, INT64_MAX, INT64_MAX}, hi[3] = {INT64_MIN, INT64_MIN, INT64_MIN};
     for (uint64_t c : core) {
-      const int64_t idx[3] = {static_cast<int64_t>(c >> 42), static_cast<int64_t>((c >> 21) & 0x1fffff),
-                              static_cast<int64_t>(c & 0x1fffff)};
+      int64_t idx[3];
+      indices(c, idx);
       for (int a = 0; a < 3; ++a) {
         lo[a] = std::min(lo[a], idx[a]);
         hi[a] = std::max(hi[a], idx[a]);
@@ -202,11 +207,11 @@ size_t bandLeafCells(const Mesh& mesh, double voxel, double half_width, size_t l
   }
   std::unordered_set<uint64_t> band;
   for (uint64_t c : core) {
-    const int64_t i0 = static_cast<int64_t>(c >> 42) - (1 << 21), j0 = static_cast<int64_t>((c >> 21) & 0x1fffff) - (1 << 21),
-                  k0 = static_cast<int64_t>(c & 0x1fffff) - (1 << 21);
-    for (int64_t i = i0 - reach; i <= i0 + reach; ++i)
-      for (int64_t j = j0 - reach; j <= j0 + reach; ++j)
-        for (int64_t k = k0 - reach; k <= k0 + reach; ++k) {
+    int64_t at[3];
+    indices(c, at);
+    for (int64_t i = at[0] - reach; i <= at[0] + reach; ++i)
+      for (int64_t j = at[1] - reach; j <= at[1] + reach; ++j)
+        for (int64_t k = at[2] - reach; k <= at[2] + reach; ++k) {
           band.insert(key(i, j, k));
           if (band.size() > limit) return band.size();
         }
@@ -239,7 +244,7 @@ double checkVoxel(const Mesh& mesh, const VdbCheckOptions& options) {
   // on bunny00 at voxels of 0.001 and 0.0005 (0.8 and 2.7 GB), 8-11 KB on a needle at 1e-5 and
   // 1e-6 (1 and 8 GB). 400,000 leaves: at most about 4.4 GB.
   constexpr size_t kMaxBandLeaves = 400'000;
-  const size_t leaves = bandLeafCells(mesh, voxel, half_width, kMaxBandLeaves);
+  const size_t leaves = bandLeafCells(mesh, lower, upper, voxel, half_width, kMaxBandLeaves);
   if (leaves > kMaxBandLeaves) {
     std::ostringstream out;
     out << mesh.name << ": a voxel of " << voxel << " and a band of " << half_width
@@ -250,10 +255,9 @@ double checkVoxel(const Mesh& mesh, const VdbCheckOptions& options) {
   return voxel;
 }
 
-}  // namespace
-
-VdbCheckReport vdbCheck(const Mesh& mesh, const std::vector<Vec3>& points, const VdbCheckOptions& options) {
-  const double voxel = checkVoxel(mesh, options);
+// vdbCheck() at a voxel checkVoxel() gave.
+VdbCheckReport checkAt(const Mesh& mesh, const std::vector<Vec3>& points, const VdbCheckOptions& options,
+                       double voxel) {
   VdbCheckReport report;
   report.mesh = mesh.name;
   report.triangles = mesh.triangles.size();
@@ -302,12 +306,16 @@ VdbCheckReport vdbCheck(const Mesh& mesh, const std::vector<Vec3>& points, const
   return report;
 }
 
+}  // namespace
+
+VdbCheckReport vdbCheck(const Mesh& mesh, const std::vector<Vec3>& points, const VdbCheckOptions& options) {
+  return checkAt(mesh, points, options, checkVoxel(mesh, options));
+}
+
 VdbCheckReport vdbCheck(const Mesh& mesh, const VdbCheckOptions& options) {
   const double voxel = checkVoxel(mesh, options);
-  VdbCheckOptions resolved = options;
-  resolved.voxel_size = voxel;
   const double offset = std::max(0.0, options.half_width - 1.5) * voxel;
-  return vdbCheck(mesh, bandPoints(mesh, options.points, offset, options.seed), resolved);
+  return checkAt(mesh, bandPoints(mesh, options.points, offset, options.seed), options, voxel);
 }
 
 }  // namespace meshsweeper

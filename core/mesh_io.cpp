@@ -446,11 +446,11 @@ std::string checkOffBody(std::istream& in, const OffHeader& header) {
                plural(header.vertices, "vertex");
     }
     if (header.colors) {
-      std::size_t numbers = static_cast<std::size_t>(corners) + 1;
-      double value;
-      while (numbers < words.size() && parseDouble(words[numbers], value) == NumberStatus::kOk) ++numbers;
       const std::size_t first = static_cast<std::size_t>(corners) + 1;
-      const std::string problem = checkOffColor(words, first, numbers - first, "face", face_colours);
+      std::size_t end = first;
+      double value;
+      while (end < words.size() && parseDouble(words[end], value) == NumberStatus::kOk) ++end;
+      const std::string problem = checkOffColor(words, first, end - first, "face", face_colours);
       if (!problem.empty()) return where + ": " + problem;
     }
   }
@@ -488,11 +488,11 @@ std::string checkObjFaces(const std::string& text) {
         // -5, '3abc' is 3): each of the first three must be a number, whole.
         if (pass == 1)
           for (std::size_t k = 1; k <= 3; ++k) {
-            const std::string at = "line " + std::to_string(line_number) + ": vertex " + std::to_string(so_far);
             double value;
+            if (k < words.size() && parseDouble(words[k], value) == NumberStatus::kOk) continue;
+            const std::string at = "line " + std::to_string(line_number) + ": vertex " + std::to_string(so_far);
             if (k >= words.size()) return at + " has fewer than 3 coordinates";
-            if (parseDouble(words[k], value) != NumberStatus::kOk)
-              return at + ": " + shown(words[k]) + " is not a finite number";
+            return at + ": " + shown(words[k]) + " is not a finite number";
           }
         ++so_far;
         continue;

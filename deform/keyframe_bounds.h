@@ -22,7 +22,8 @@ class KeyframeBody {
   KeyframeBody& operator=(const KeyframeBody&) = delete;
 
   // Sets the time t in [0, frameCount() - 1] (clamped; a time that is not finite throws
-  // std::invalid_argument): frame floor(t) and the next, weight t - floor(t). Interpolates positions and bounds (the per-frame cost; no geometry rebuilt).
+  // std::invalid_argument): frame floor(t) and the next, weight t - floor(t). Interpolates
+  // positions and bounds (the per-frame cost; no geometry rebuilt).
   void setTime(double t);
   double time() const { return time_; }
   size_t frameCount() const { return frames_.size(); }
