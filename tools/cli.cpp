@@ -7,11 +7,63 @@
 #include <cstdlib>
 #include <cstring>
 
+#include <fcntl.h>
+#include <signal.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
 namespace meshsweeper::cli {
 
 namespace {
 
 constexpr size_t kOutputBufferBytes = 1 << 16;
+
+// Temporary output files that an interrupted run removes: a fixed table of C strings, which
+// the signal handler reads (async-signal-safe: no allocation, no locks).
+constexpr int kMaxTemporaries = 8;
+constexpr size_t kMaxTemporaryPath = 4096;
+char g_temporaries[kMaxTemporaries][kMaxTemporaryPath];
+volatile sig_atomic_t g_temporary_used[kMaxTemporaries];
+constexpr int kCleanupSignals[] = {SIGINT, SIGTERM, SIGHUP};
+
+extern "C" void removeTemporariesAndResignal(int signal) {
+  for (int i = 0; i < kMaxTemporaries; ++i)
+    if (g_temporary_used[i]) ::unlink(g_temporaries[i]);
+  // The handler was reset on entry (SA_RESETHAND): the signal, blocked until the handler
+  // returns, then ends the process as it would have.
+  ::raise(signal);
+}
+
+// Installs the handler for signals that have their default action now (an ignored SIGHUP,
+// under nohup, stays ignored; a program's own handler is kept).
+void installCleanup() {
+  for (const int sig : kCleanupSignals) {
+    struct sigaction old {};
+    if (::sigaction(sig, nullptr, &old) != 0 || old.sa_handler != SIG_DFL) continue;
+    struct sigaction act {};
+    act.sa_handler = removeTemporariesAndResignal;
+    sigemptyset(&act.sa_mask);
+    act.sa_flags = SA_RESETHAND;
+    ::sigaction(sig, &act, nullptr);
+  }
+}
+
+// Registers a temporary file for removal on a signal (quietly not, past the table's size).
+void registerTemporary(const std::string& path) {
+  if (path.size() >= kMaxTemporaryPath) return;
+  installCleanup();
+  for (int i = 0; i < kMaxTemporaries; ++i) {
+    if (g_temporary_used[i]) continue;
+    std::memcpy(g_temporaries[i], path.c_str(), path.size() + 1);
+    g_temporary_used[i] = 1;
+    return;
+  }
+}
+
+void unregisterTemporary(const std::string& path) {
+  for (int i = 0; i < kMaxTemporaries; ++i)
+    if (g_temporary_used[i] && path == g_temporaries[i]) g_temporary_used[i] = 0;
+}
 
 const OptionSpec* findSpec(const std::vector<OptionSpec>& specs, const std::string& name) {
   for (const OptionSpec& spec : specs) {
@@ -130,18 +182,70 @@ double parseFiniteDouble(const std::string& text, const std::string& what) {
 }
 
 Output::Output(const std::string& path) : path_(path.empty() ? "-" : path) {
+  buffer_.reserve(kOutputBufferBytes);
   if (path_ == "-") {
     file_ = stdout;
-  } else {
-    file_ = std::fopen(path_.c_str(), "wb");
-    if (!file_) throw IoError(path_ + ": cannot open for writing: " + std::strerror(errno));
-    owned_ = true;
+    return;
   }
-  buffer_.reserve(kOutputBufferBytes);
+  const auto cannotOpen = [&](int error) {
+    return IoError(path_ + ": cannot open for writing: " + std::strerror(error));
+  };
+  const std::string target = outputDestination(path_).string();
+  struct stat st {};
+  const bool exists = ::stat(target.c_str(), &st) == 0;
+  // In place: not a regular file (a device, a pipe, a directory, which fopen refuses), one
+  // with other names that a rename would separate from it, or a link that leads nowhere (a
+  // loop, which fopen reports).
+  struct stat link {};
+  bool in_place = (exists && (!S_ISREG(st.st_mode) || st.st_nlink > 1)) ||
+                  (::lstat(target.c_str(), &link) == 0 && S_ISLNK(link.st_mode));
+  if (!in_place) {
+    if (exists && ::access(target.c_str(), W_OK) != 0) throw cannotOpen(errno);
+    std::string name = target + ".partial-XXXXXX";
+    const int fd = ::mkstemp(name.data());
+    if (fd >= 0) {
+      file_ = ::fdopen(fd, "wb");
+      if (!file_) {
+        const int error = errno;
+        ::close(fd);
+        ::unlink(name.c_str());
+        throw cannotOpen(error);
+      }
+      owned_ = true;
+      temporary_ = name;
+      target_ = target;
+      if (exists) {
+        mode_ = st.st_mode & 07777;
+      } else {
+        const mode_t mask = ::umask(0);
+        ::umask(mask);
+        mode_ = 0666 & ~mask;
+      }
+      registerTemporary(temporary_);
+      return;
+    }
+    // No temporary beside it (a name at the length limit, or a writable file in a directory
+    // that is not): the file itself, as before.
+    const int error = errno;
+    if (!(error == ENAMETOOLONG || (exists && (error == EACCES || error == EPERM || error == EROFS))))
+      throw cannotOpen(error);
+    in_place = true;
+  }
+  file_ = std::fopen(path_.c_str(), "wb");
+  if (!file_) throw cannotOpen(errno);
+  owned_ = true;
 }
 
 Output::~Output() {
   if (owned_ && file_) std::fclose(file_);
+  discardTemporary();
+}
+
+void Output::discardTemporary() {
+  if (temporary_.empty()) return;
+  unregisterTemporary(temporary_);
+  ::unlink(temporary_.c_str());
+  temporary_.clear();
 }
 
 void Output::flushBuffer() {
@@ -172,11 +276,39 @@ void Output::close() {
   flushBuffer();
   if (std::fflush(file_) != 0) failed_ = true;
   if (owned_) {
+    // The permissions of the file replaced (or a new file's); a file system without them
+    // refusing is no failure of the write.
+    if (!temporary_.empty()) (void)::fchmod(::fileno(file_), static_cast<mode_t>(mode_));
     if (std::fclose(file_) != 0) failed_ = true;
     file_ = nullptr;
     owned_ = false;
   }
-  if (failed_) throw IoError((path_ == "-" ? std::string("standard output") : path_) + ": write failed");
+  const std::string name = path_ == "-" ? std::string("standard output") : path_;
+  if (failed_) {
+    discardTemporary();
+    throw IoError(name + ": write failed");
+  }
+  if (temporary_.empty()) return;
+  if (std::rename(temporary_.c_str(), target_.c_str()) != 0) {
+    const int error = errno;
+    discardTemporary();
+    throw IoError(name + ": cannot replace: " + std::strerror(error));
+  }
+  unregisterTemporary(temporary_);
+  temporary_.clear();
+}
+
+std::filesystem::path outputDestination(const std::string& name) {
+  namespace fs = std::filesystem;
+  std::error_code error;
+  fs::path path = fs::absolute(name, error);
+  for (int hop = 0; hop < 40 && fs::is_symlink(path, error); ++hop) {
+    const fs::path target = fs::read_symlink(path, error);
+    if (error) break;
+    path = target.is_absolute() ? target : path.parent_path() / target;
+  }
+  const fs::path canonical = fs::weakly_canonical(path, error);
+  return error ? path.lexically_normal() : canonical;
 }
 
 std::string jsonString(const std::string& text) {

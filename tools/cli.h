@@ -9,6 +9,7 @@
 #include <chrono>
 #include <cstdint>
 #include <cstdio>
+#include <filesystem>
 #include <stdexcept>
 #include <string>
 #include <vector>
@@ -74,8 +75,15 @@ uint64_t parseInteger(const std::string& text, const std::string& what, uint64_t
 // Parses a whole string as a finite double; throws UsageError.
 double parseFiniteDouble(const std::string& text, const std::string& what);
 
-// An output destination: a file (created or truncated) or standard output for "" or "-".
-// Writes are buffered; close() flushes and throws IoError if anything failed.
+// An output destination: a file, or standard output for "" or "-". Writes are buffered;
+// close() flushes and throws IoError if anything failed.
+//
+// A regular file (new, or existing with one name) is written to a temporary file beside it
+// ("NAME.partial-XXXXXX", created at once, so a bad path fails before any work) that close()
+// renames over it: a run that fails, throws or is interrupted (SIGINT, SIGTERM, SIGHUP) leaves
+// the file as it was and removes the temporary one. An existing file keeps its permissions; a
+// symbolic link is written through (its target is replaced, the link stays). Anything else (a
+// device, a pipe, /dev/stdout, a file with several hard links) is written in place.
 class Output {
  public:
   explicit Output(const std::string& path);
@@ -87,7 +95,8 @@ class Output {
   void write(const std::string& text) { write(text.data(), text.size()); }
   // printf-style formatted line or fragment (at most 1024 characters per call).
   void printf(const char* format, ...) __attribute__((format(printf, 2, 3)));
-  // Flushes; throws IoError ("PATH: write failed") if any write failed.
+  // Flushes and puts the file in place; throws IoError ("PATH: write failed") if any write
+  // failed, the destination then unchanged.
   void close();
 
  private:
@@ -96,8 +105,16 @@ class Output {
   bool owned_ = false;
   std::string buffer_;
   bool failed_ = false;
+  std::string temporary_;    // the file written, renamed over target_ by close() ("": in place)
+  std::string target_;       // the destination, symbolic links followed
+  unsigned mode_ = 0;        // the permissions target_ gets
   void flushBuffer();
+  void discardTemporary();
 };
+
+// The path a name leads to, symbolic links followed even when their target does not exist yet
+// (a dangling link is created through when written).
+std::filesystem::path outputDestination(const std::string& name);
 
 // Wall-clock seconds since construction.
 class Timer {

@@ -87,21 +87,6 @@ bool namesStandardOutput(const std::string& path) {
          out.st_ino == named.st_ino;
 }
 
-// The path a name leads to, symbolic links followed even when their target does not exist yet
-// (a dangling link is created through when written).
-std::filesystem::path destination(const std::string& name) {
-  namespace fs = std::filesystem;
-  std::error_code error;
-  fs::path path = fs::absolute(name, error);
-  for (int hop = 0; hop < 40 && fs::is_symlink(path, error); ++hop) {
-    const fs::path target = fs::read_symlink(path, error);
-    if (error) break;
-    path = target.is_absolute() ? target : path.parent_path() / target;
-  }
-  const fs::path canonical = fs::weakly_canonical(path, error);
-  return error ? path.lexically_normal() : canonical;
-}
-
 // Whether two output paths are one destination: both standard output, the same existing file
 // under two names, or one new file reached two ways ("r.json", "./r.json", a link to it).
 bool sameDestination(const std::string& a, const std::string& b) {
@@ -109,7 +94,7 @@ bool sameDestination(const std::string& a, const std::string& b) {
   if (a == b) return true;
   std::error_code error;
   if (std::filesystem::equivalent(a, b, error)) return true;
-  return destination(a) == destination(b);
+  return outputDestination(a) == outputDestination(b);
 }
 
 std::string jsonNumber(double x) {

@@ -389,6 +389,41 @@ file(WRITE "${WORK_DIR}/dot.off" "OFF\n3 1 0\n1 1 1\n1 1 1\n1 1 1\n3 0 1 2\n")
 check(hausdorff_zero_diagonal_percent RC 0 ARGS hausdorff dot.off quad.off --tolerance 0.1
   OUT "(n/a% of A's diagonal)" NOT_OUT "(0.00000%")
 
+# Output files are written beside the destination and renamed over it: a run that fails
+# leaves an existing file as it was (dot.off has a zero diagonal, refused after --json was
+# opened); one that succeeds replaces it, keeping its permissions; a link is written through.
+# expect(NAME CONDITION WHAT): CONDITION is an if() condition, evaluated here.
+function(expect name condition what)
+  cmake_language(EVAL CODE "if(${condition})\n set(ok TRUE)\nelse()\n set(ok FALSE)\nendif()")
+  if(ok)
+    math(EXPR passed "${passed} + 1")
+  else()
+    message("FAIL ${name}: ${what}")
+    math(EXPR failed "${failed} + 1")
+  endif()
+  set(passed ${passed} PARENT_SCOPE)
+  set(failed ${failed} PARENT_SCOPE)
+endfunction()
+file(WRITE "${WORK_DIR}/kept.json" "keep\n")
+file(CHMOD "${WORK_DIR}/kept.json" PERMISSIONS OWNER_READ OWNER_WRITE GROUP_READ)
+check(output_kept_on_error RC 1 ARGS hausdorff dot.off quad.off --json kept.json
+  ERR "dot.off: all vertices coincide")
+file(READ "${WORK_DIR}/kept.json" kept)
+expect(output_kept_on_error_content "kept STREQUAL \"keep\n\"" "kept.json holds '${kept}'")
+check(output_replaced RC 0 ARGS hausdorff quad.off dot.off --json kept.json OUT "Hausdorff distance in")
+file(READ "${WORK_DIR}/kept.json" kept)
+execute_process(COMMAND stat -c %a kept.json WORKING_DIRECTORY "${WORK_DIR}" OUTPUT_VARIABLE mode
+  OUTPUT_STRIP_TRAILING_WHITESPACE)
+string(FIND "${kept}" "\"hausdorff\"" at)
+expect(output_replaced_content "NOT at EQUAL -1 AND mode STREQUAL 640" "mode '${mode}', kept.json holds '${kept}'")
+file(MAKE_DIRECTORY "${WORK_DIR}/linked")
+file(CREATE_LINK "linked/target.csv" "${WORK_DIR}/through.csv" SYMBOLIC)
+check(output_through_link RC 0 ARGS closest quad.off points.txt --out through.csv ERR "\"rows\": 3")
+file(READ "${WORK_DIR}/linked/target.csv" through)
+string(FIND "${through}" "point,rank,distance" at)
+expect(output_through_link_target "IS_SYMLINK \"${WORK_DIR}/through.csv\" AND at EQUAL 0"
+  "through.csv should stay a link to linked/target.csv, which holds '${through}'")
+
 # A report that cannot be written (a full device) is an error, whatever the command.
 if(EXISTS /dev/full)
   foreach(command "info;quad.off" "closest;quad.off;points.txt" "hausdorff;quad.off;quad.off")
@@ -403,6 +438,10 @@ if(EXISTS /dev/full)
     endif()
   endforeach()
 endif()
+
+# No run leaves a temporary output file behind.
+file(GLOB_RECURSE partials "${WORK_DIR}/*.partial-*")
+expect(no_temporaries "NOT partials" "left behind: ${partials}")
 
 message("meshsweep_cli: ${passed} passed, ${failed} failed")
 if(failed GREATER 0)

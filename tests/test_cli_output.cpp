@@ -1,0 +1,199 @@
+// The command-line tool's output files (tools/cli.h, Output): written beside the destination
+// and renamed over it, so that a run that fails, throws or is interrupted leaves an existing
+// file as it was and no temporary file behind.
+#include "tools/cli.h"
+
+#include <catch2/catch.hpp>
+
+#include <sys/stat.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <csignal>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+#include <string>
+#include <vector>
+
+namespace fs = std::filesystem;
+using meshsweeper::cli::IoError;
+using meshsweeper::cli::Output;
+
+namespace {
+
+// A fresh directory under the build's temporary directory, removed with the object.
+struct Scratch {
+  fs::path dir;
+  explicit Scratch(const std::string& name) {
+    dir = fs::temp_directory_path() / ("meshsweeper_test_cli_output_" + name + "_" + std::to_string(::getpid()));
+    fs::remove_all(dir);
+    fs::create_directories(dir);
+  }
+  ~Scratch() {
+    std::error_code error;
+    fs::remove_all(dir, error);
+  }
+  std::string path(const std::string& name) const { return (dir / name).string(); }
+  // The names in the directory, sorted.
+  std::vector<std::string> names() const {
+    std::vector<std::string> out;
+    for (const auto& entry : fs::directory_iterator(dir)) out.push_back(entry.path().filename().string());
+    std::sort(out.begin(), out.end());
+    return out;
+  }
+};
+
+std::string readFile(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  std::ostringstream text;
+  text << in.rdbuf();
+  return text.str();
+}
+
+void writeFile(const std::string& path, const std::string& text) {
+  std::ofstream(path, std::ios::binary) << text;
+}
+
+unsigned permissions(const std::string& path) {
+  struct stat st {};
+  REQUIRE(::stat(path.c_str(), &st) == 0);
+  return st.st_mode & 07777;
+}
+
+}  // namespace
+
+TEST_CASE("output: an existing file is replaced only when close() succeeds", "[cli][output]") {
+  Scratch s("replace");
+  const std::string file = s.path("result.json");
+  writeFile(file, "keep\n");
+  ::chmod(file.c_str(), 0640);
+  {
+    Output out(file);
+    out.write("new contents\n");
+    // Until close(), the destination holds what it held, and the rows go to a temporary file
+    // beside it.
+    CHECK(readFile(file) == "keep\n");
+    const std::vector<std::string> names = s.names();
+    REQUIRE(names.size() == 2);
+    CHECK(names[0] == "result.json");
+    CHECK(names[1].rfind("result.json.partial-", 0) == 0);
+    out.close();
+  }
+  CHECK(readFile(file) == "new contents\n");
+  CHECK(permissions(file) == 0640);
+  CHECK(s.names() == std::vector<std::string>{"result.json"});
+}
+
+TEST_CASE("output: a run that throws before close() leaves the file as it was", "[cli][output]") {
+  Scratch s("throw");
+  const std::string file = s.path("result.csv");
+  writeFile(file, "keep\n");
+  try {
+    Output out(file);
+    out.write("half a result");
+    throw std::runtime_error("the computation failed");
+  } catch (const std::runtime_error&) {
+  }
+  CHECK(readFile(file) == "keep\n");
+  CHECK(s.names() == std::vector<std::string>{"result.csv"});
+  // A new file is not created at all.
+  try {
+    Output out(s.path("new.csv"));
+    throw std::runtime_error("the computation failed");
+  } catch (const std::runtime_error&) {
+  }
+  CHECK(s.names() == std::vector<std::string>{"result.csv"});
+}
+
+TEST_CASE("output: an interrupted run leaves the file as it was and no temporary file", "[cli][output]") {
+  Scratch s("signal");
+  const std::string file = s.path("result.json");
+  for (const int sig : {SIGINT, SIGTERM, SIGHUP}) {
+    writeFile(file, "keep\n");
+    const pid_t child = ::fork();
+    REQUIRE(child >= 0);
+    if (child == 0) {
+      // Default actions, as a shell gives a command it runs in the foreground.
+      std::signal(sig, SIG_DFL);
+      Output out(file);
+      out.write("half a result");
+      ::raise(sig);
+      ::_exit(0);  // not reached: the signal ends the process
+    }
+    int status = 0;
+    REQUIRE(::waitpid(child, &status, 0) == child);
+    CAPTURE(sig);
+    CHECK(WIFSIGNALED(status));
+    CHECK(WTERMSIG(status) == sig);
+    CHECK(readFile(file) == "keep\n");
+    CHECK(s.names() == std::vector<std::string>{"result.json"});
+  }
+}
+
+TEST_CASE("output: a new file takes the umask's permissions; a link is written through", "[cli][output]") {
+  Scratch s("link");
+  const mode_t mask = ::umask(022);
+  {
+    Output out(s.path("plain.txt"));
+    out.write("x");
+    out.close();
+  }
+  CHECK(permissions(s.path("plain.txt")) == 0644);
+  fs::create_directories(s.dir / "sub");
+  fs::create_symlink("sub/target.txt", s.dir / "link.txt");  // dangling until written
+  {
+    Output out(s.path("link.txt"));
+    out.write("through");
+    out.close();
+  }
+  ::umask(mask);
+  CHECK(fs::is_symlink(s.dir / "link.txt"));
+  CHECK(readFile(s.path("sub/target.txt")) == "through");
+  CHECK(fs::directory_iterator(s.dir / "sub")->path().filename() == "target.txt");
+}
+
+TEST_CASE("output: devices and files with several names are written in place", "[cli][output]") {
+  Scratch s("in_place");
+  const std::string file = s.path("a.txt");
+  writeFile(file, "keep\n");
+  fs::create_hard_link(file, s.dir / "b.txt");
+  {
+    Output out(file);
+    out.write("both names");
+    CHECK(s.names() == std::vector<std::string>{"a.txt", "b.txt"});  // no temporary file
+    out.close();
+  }
+  CHECK(readFile(s.path("b.txt")) == "both names");
+  {
+    Output out("/dev/null");
+    out.write("nothing");
+    out.close();
+  }
+  CHECK(fs::is_character_file("/dev/null"));
+}
+
+TEST_CASE("output: a missing directory or a directory as the file is refused at once", "[cli][output]") {
+  Scratch s("refused");
+  CHECK_THROWS_WITH(Output(s.path("no/such/dir/out.csv")),
+                    Catch::Contains("no/such/dir/out.csv: cannot open for writing: No such file or directory"));
+  fs::create_directories(s.dir / "taken");
+  CHECK_THROWS_WITH(Output(s.path("taken")), Catch::Contains("taken: cannot open for writing: Is a directory"));
+  // A loop of links is refused as such, not replaced by a file.
+  fs::create_symlink("loop_b", s.dir / "loop_a");
+  fs::create_symlink("loop_a", s.dir / "loop_b");
+  CHECK_THROWS_WITH(Output(s.path("loop_a")), Catch::Contains("loop_a: cannot open for writing: Too many levels"));
+  CHECK(fs::is_symlink(s.dir / "loop_a"));
+  CHECK(s.names() == std::vector<std::string>{"loop_a", "loop_b", "taken"});
+}
+
+#if defined(__linux__)
+TEST_CASE("output: a write that fails is reported by close()", "[cli][output]") {
+  // /dev/full refuses every write: written in place (a device), the error is reported by close().
+  if (!fs::exists("/dev/full")) return;
+  Output out("/dev/full");
+  out.write("anything");
+  CHECK_THROWS_AS(out.close(), IoError);
+}
+#endif
