@@ -1,5 +1,6 @@
 #include "tools/cli.h"
 
+#include <atomic>
 #include <cctype>
 #include <cerrno>
 #include <cmath>
@@ -55,6 +56,7 @@ void registerTemporary(const std::string& path) {
   for (int i = 0; i < kMaxTemporaries; ++i) {
     if (g_temporary_used[i]) continue;
     std::memcpy(g_temporaries[i], path.c_str(), path.size() + 1);
+    std::atomic_signal_fence(std::memory_order_seq_cst);  // the name is whole before it is used
     g_temporary_used[i] = 1;
     return;
   }
@@ -197,7 +199,7 @@ Output::Output(const std::string& path) : path_(path.empty() ? "-" : path) {
   // with other names that a rename would separate from it, or a link that leads nowhere (a
   // loop, which fopen reports).
   struct stat link {};
-  bool in_place = (exists && (!S_ISREG(st.st_mode) || st.st_nlink > 1)) ||
+  const bool in_place = (exists && (!S_ISREG(st.st_mode) || st.st_nlink > 1)) ||
                   (::lstat(target.c_str(), &link) == 0 && S_ISLNK(link.st_mode));
   if (!in_place) {
     if (exists && ::access(target.c_str(), W_OK) != 0) throw cannotOpen(errno);
@@ -229,7 +231,6 @@ Output::Output(const std::string& path) : path_(path.empty() ? "-" : path) {
     const int error = errno;
     if (!(error == ENAMETOOLONG || (exists && (error == EACCES || error == EPERM || error == EROFS))))
       throw cannotOpen(error);
-    in_place = true;
   }
   file_ = std::fopen(path_.c_str(), "wb");
   if (!file_) throw cannotOpen(errno);
