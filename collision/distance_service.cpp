@@ -1187,14 +1187,8 @@ void DistanceService::step(PointsRef points, double max_distance, QueryMode mode
   } catch (...) {
     // Out of memory (or a thread's exception): the result is left empty, not half-written (a
     // within step's hits are swapped out while it runs, found by review), and a removed body's
-    // states still count as removed until a step completes.
-    out.mode_ = QueryMode::kClosest;
-    out.status_.clear();
-    out.count_.clear();
-    out.begin_.clear();
-    out.hits_.clear();
-    out.block_hits_.clear();
-    out.stats_ = {};
+    // states still count as removed until a step completes. Its memory goes with it.
+    out = StepResult();
     throw;
   }
   m.removed_states = false;  // this step's alignStates() dropped them (see remove())

@@ -308,7 +308,7 @@ class DistanceService {
   // counts as within any max_distance, 0 included, with its distance as computed. Points with a NaN or infinite coordinate get PointStatus::kNotFinite,
   // finite ones beyond 1e150 kOutOfRange, and no hits (the step goes on). Throws std::invalid_argument if max_distance is NaN or negative.
   // Results are written into `out` (its memory reused); if the step throws (out of memory), `out`
-  // is left empty (size() 0); the service stays usable and the next step answers exactly.
+  // is left empty (size() 0, its memory released); the service stays usable and the next step answers exactly.
   void step(PointsRef points, double max_distance, QueryMode mode, StepResult& out);
   StepResult step(PointsRef points, double max_distance, QueryMode mode = QueryMode::kClosest);
 
