@@ -4,6 +4,7 @@
 #include <tbb/blocked_range.h>
 #include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
+#include <tbb/parallel_reduce.h>
 
 #include <algorithm>
 #include <array>
@@ -28,41 +29,113 @@ uint64_t nextGeometryVersion() {
   return ++counter;
 }
 
-float boxMargin(double extent) {
-  return static_cast<float>(std::max(1.0, extent) * std::ldexp(1.0, -19));
+void packSlotBoxes(Node8& n, const SlotBoxes& boxes, double slack) {
+  constexpr double inf = std::numeric_limits<double>::infinity();
+  double union_lo[3] = {inf, inf, inf}, union_hi[3] = {-inf, -inf, -inf};
+  bool any = false;
+  for (int k = 0; k < 8; ++k) {
+    if (!(boxes.lower[0][k] <= boxes.upper[0][k])) continue;  // empty (or NaN: never a box)
+    any = true;
+    for (int axis = 0; axis < 3; ++axis) {
+      union_lo[axis] = std::min(union_lo[axis], boxes.lower[axis][k]);
+      union_hi[axis] = std::max(union_hi[axis], boxes.upper[axis][k]);
+    }
+  }
+  // Any origin is valid: the centre of the union keeps the offsets smallest.
+  for (int axis = 0; axis < 3; ++axis) n.origin[axis] = any ? 0.5 * union_lo[axis] + 0.5 * union_hi[axis] : 0.0;
+  // Offsets from the origin (double: relative error 2^-53, which floatBelow/Above's relative
+  // 2^-23 covers). A query point q is rounded to float as fl(q - origin), off by at most
+  // 2^-24 |q - origin| <= 2^-24 (gap to the box + largest offset) per axis: the gap's share
+  // is relative (the queries' box slack), the offset's is the margin below, 8 times over.
+  double offset_lo[3][8], offset_hi[3][8];
+  double largest = 0;
+  for (int axis = 0; axis < 3; ++axis) {
+    const double o = n.origin[axis];
+    for (int k = 0; k < 8; ++k) {
+      offset_lo[axis][k] = boxes.lower[axis][k] - o;
+      offset_hi[axis][k] = boxes.upper[axis][k] - o;
+      if (boxes.lower[0][k] <= boxes.upper[0][k])
+        largest = std::max({largest, std::abs(offset_lo[axis][k]), std::abs(offset_hi[axis][k])});
+    }
+  }
+  const double margin = largest * 0x1p-21 + slack;
+  for (int k = 0; k < 8; ++k) {
+    const bool used = boxes.lower[0][k] <= boxes.upper[0][k];
+    for (int axis = 0; axis < 3; ++axis) {
+      n.lower[axis][k] = used ? floatBelow(offset_lo[axis][k] - margin) : std::numeric_limits<float>::infinity();
+      n.upper[axis][k] = used ? floatAbove(offset_hi[axis][k] + margin) : -std::numeric_limits<float>::infinity();
+    }
+  }
+}
+
+void slotBox(const Node8& n, int k, double lower[3], double upper[3]) {
+  constexpr double inf = std::numeric_limits<double>::infinity();
+  const bool used = n.lower[0][k] <= n.upper[0][k];
+  for (int axis = 0; axis < 3; ++axis) {
+    if (!used) {
+      lower[axis] = inf;
+      upper[axis] = -inf;
+      continue;
+    }
+    // origin + offset, off by at most half an ulp in double: one ulp outward keeps the box
+    // holding what the stored one holds.
+    const double o = n.origin[axis];
+    lower[axis] = std::nextafter(o + static_cast<double>(n.lower[axis][k]), -inf);
+    upper[axis] = std::nextafter(o + static_cast<double>(n.upper[axis][k]), inf);
+  }
+}
+
+SlotBoxes slotBoxes(const Node8& n) {
+  SlotBoxes out;
+  for (int k = 0; k < 8; ++k) {
+    double lo[3], hi[3];
+    slotBox(n, k, lo, hi);
+    for (int axis = 0; axis < 3; ++axis) {
+      out.lower[axis][k] = lo[axis];
+      out.upper[axis][k] = hi[axis];
+    }
+  }
+  return out;
 }
 
 namespace {
 
 // Rewrites every used slot's box, children first (a child node always has a larger index than
-// its parent): a leaf slot's from leaf_box(leaf, lo, hi), an inner slot's as the union of its
-// child node's used slots.
+// its parent): a leaf slot's from leaf_box(leaf, lo, hi) (scaled double coordinates, holding
+// the leaf's faces), an inner slot's as the union of its child node's used slots; each node
+// packed with packSlotBoxes (slack: the rounding of scaled coordinates up to `magnitude`).
 template <class LeafBox>
-void refitSlotBoxes(std::vector<Node8>& nodes, LeafBox&& leaf_box) {
-  const float inf = std::numeric_limits<float>::infinity();
+void refitSlotBoxes(std::vector<Node8>& nodes, double magnitude, LeafBox&& leaf_box) {
+  constexpr double inf = std::numeric_limits<double>::infinity();
+  const double slack = scaledRounding(magnitude);
   for (size_t node = nodes.size(); node-- > 0;) {
     Node8& n = nodes[node];
+    SlotBoxes boxes;
     for (int k = 0; k < 8; ++k) {
       const ChildRef c = n.child[k];
-      if (c == kEmptyChild) continue;
-      float lo[3] = {inf, inf, inf}, hi[3] = {-inf, -inf, -inf};
-      if (isLeafRef(c)) {
+      double lo[3] = {inf, inf, inf}, hi[3] = {-inf, -inf, -inf};
+      if (c == kEmptyChild) {
+        // empty: stays empty
+      } else if (isLeafRef(c)) {
         leaf_box(leafIndex(c), lo, hi);
       } else {
         const Node8& child = nodes[c];
         for (int j = 0; j < 8; ++j) {
           if (child.child[j] == kEmptyChild) continue;
+          double clo[3], chi[3];
+          slotBox(child, j, clo, chi);
           for (int axis = 0; axis < 3; ++axis) {
-            lo[axis] = std::min(lo[axis], child.lower[axis][j]);
-            hi[axis] = std::max(hi[axis], child.upper[axis][j]);
+            lo[axis] = std::min(lo[axis], clo[axis]);
+            hi[axis] = std::max(hi[axis], chi[axis]);
           }
         }
       }
       for (int axis = 0; axis < 3; ++axis) {
-        n.lower[axis][k] = lo[axis];
-        n.upper[axis][k] = hi[axis];
+        boxes.lower[axis][k] = lo[axis];
+        boxes.upper[axis][k] = hi[axis];
       }
     }
+    packSlotBoxes(n, boxes, slack);
   }
 }
 
@@ -74,13 +147,13 @@ void refitBounds(const Hierarchy& h, const Vec3* positions, std::vector<Node8>& 
   const double scale = h.boxScale();
   const float inf = std::numeric_limits<float>::infinity();
   // Leaf slots from their faces' vertices (refitSlotBoxes does the inner slots); unused lanes
-  // copy lane 0's corners, so all eight count.
-  double extent = 0;
-  for (size_t v = 0; boxes && v < mesh.positions.size(); ++v)
-    extent = std::max(extent, ((positions[v] - h.center()) * scale).cwiseAbs().maxCoeff());
-  const float margin = boxMargin(extent);
+  // copy lane 0's corners, so all eight count. Scaled coordinates are rounded once (relative
+  // 2^-53 of their magnitude): the packing's slack.
   if (boxes) {
-    refitSlotBoxes(nodes, [&](int32_t leaf, float lo[3], float hi[3]) {
+    double magnitude = 0;
+    for (size_t v = 0; v < mesh.positions.size(); ++v)
+      magnitude = std::max(magnitude, ((positions[v] - h.center()) * scale).cwiseAbs().maxCoeff());
+    refitSlotBoxes(nodes, magnitude, [&](int32_t leaf, double lo[3], double hi[3]) {
       Vec3 low = Vec3::Constant(std::numeric_limits<double>::infinity()), high = -low;
       for (uint32_t lane = 0; lane < 8; ++lane) {
         for (VertexIndex v : corners[8 * static_cast<size_t>(leaf) + lane]) {
@@ -90,8 +163,8 @@ void refitBounds(const Hierarchy& h, const Vec3* positions, std::vector<Node8>& 
       }
       const Vec3 scaled_low = (low - h.center()) * scale, scaled_high = (high - h.center()) * scale;
       for (int axis = 0; axis < 3; ++axis) {
-        lo[axis] = std::nextafter(static_cast<float>(scaled_low[axis]), -inf) - margin;
-        hi[axis] = std::nextafter(static_cast<float>(scaled_high[axis]), inf) + margin;
+        lo[axis] = scaled_low[axis];
+        hi[axis] = scaled_high[axis];
       }
     });
   }
@@ -147,20 +220,24 @@ void refitBounds(const Hierarchy& h, const Vec3* positions, std::vector<Node8>& 
               continue;
             }
             // Bound each slot by a ball around its box: sqrt(d(centre, T)) + half diagonal
-            // (the box is converted back from scaled coordinates and holds its vertices with a
-            // float margin, far above the rounding of this bound; the 1e-6 slack covers the
-            // rest). Visit the farthest first (pushed last).
+            // (the box, converted back from scaled coordinates, holds its vertices; the
+            // rounding of the centre is added, and the 1e-6 slack covers the rest of this
+            // bound's). Visit the farthest first (pushed last).
             const Node8& m = nodes[ref];
             const size_t first = pending.size();
             for (int j = 0; j < 8; ++j) {
               if (m.child[j] == kEmptyChild) continue;
+              double slot_lo[3], slot_hi[3];
+              slotBox(m, j, slot_lo, slot_hi);
               Vec3 lo, hi;
               for (int axis = 0; axis < 3; ++axis) {
-                lo[axis] = m.lower[axis][j] / scale;
-                hi[axis] = m.upper[axis][j] / scale;
+                lo[axis] = slot_lo[axis] / scale;
+                hi[axis] = slot_hi[axis] / scale;
               }
               const Vec3 centre = h.center() + 0.5 * (lo + hi);
-              const double reach = std::sqrt(squaredDistanceToTriangle(centre, a, b, c)) + 0.5 * (hi - lo).norm();
+              // Plus the rounding of the centre's coordinates (relative 2^-52 of their size).
+              const double reach = std::sqrt(squaredDistanceToTriangle(centre, a, b, c)) + 0.5 * (hi - lo).norm() +
+                                   centre.cwiseAbs().maxCoeff() * 0x1p-48;
               const double squared_reach = reach * reach * (1 + 1e-6);
               if (squared_reach > worst) pending.emplace_back(squared_reach, m.child[j]);
             }
@@ -237,35 +314,40 @@ TreeGeometry Hierarchy::restGeometry() const {
   return g;
 }
 
-void refreshLeafBlocks(const Hierarchy& h, const Vec3* positions, double extent, std::vector<TriangleBlock8>& blocks,
+void refreshLeafBlocks(const Hierarchy& h, const Vec3* positions, std::vector<TriangleBlock8>& blocks,
                        std::vector<Node8>& nodes) {
   const Triangle* corners = h.leafCorners().data();
   const double scale = h.boxScale();
   const Vec3& center = h.center();
-  const float margin = boxMargin(extent);
   blocks.resize(h.leafCount());
   // Each block is assembled on the stack and its box taken there (not read back afterwards:
-  // a large body's blocks do not stay in the caches).
-  std::vector<std::array<float, 6>> leaf_boxes(h.leafCount());
-  tbb::parallel_for(tbb::blocked_range<size_t>(0, blocks.size(), 256), [&](const tbb::blocked_range<size_t>& range) {
-    for (size_t leaf = range.begin(); leaf < range.end(); ++leaf) {
-      TriangleBlock8 b;
-      gatherLeafBlock(corners + 8 * leaf, positions, b);
-      // Unused lanes copy a used one, so all 8 lanes of each corner count.
-      for (int axis = 0; axis < 3; ++axis) {
-        double low = b.v[0][axis][0], high = low;
-        for (int corner = 0; corner < 3; ++corner)
-          for (int lane = 0; lane < 8; ++lane) {
-            low = std::min(low, b.v[corner][axis][lane]);
-            high = std::max(high, b.v[corner][axis][lane]);
+  // a large body's blocks do not stay in the caches). The boxes in scaled coordinates (each
+  // rounded once: the packing's slack, from the largest of them).
+  std::vector<std::array<double, 6>> leaf_boxes(h.leafCount());
+  const double magnitude = tbb::parallel_reduce(
+      tbb::blocked_range<size_t>(0, blocks.size(), 256), 0.0,
+      [&](const tbb::blocked_range<size_t>& range, double largest) {
+        for (size_t leaf = range.begin(); leaf < range.end(); ++leaf) {
+          TriangleBlock8 b;
+          gatherLeafBlock(corners + 8 * leaf, positions, b);
+          // Unused lanes copy a used one, so all 8 lanes of each corner count.
+          for (int axis = 0; axis < 3; ++axis) {
+            double low = b.v[0][axis][0], high = low;
+            for (int corner = 0; corner < 3; ++corner)
+              for (int lane = 0; lane < 8; ++lane) {
+                low = std::min(low, b.v[corner][axis][lane]);
+                high = std::max(high, b.v[corner][axis][lane]);
+              }
+            leaf_boxes[leaf][axis] = (low - center[axis]) * scale;
+            leaf_boxes[leaf][3 + axis] = (high - center[axis]) * scale;
+            largest = std::max({largest, std::abs(leaf_boxes[leaf][axis]), std::abs(leaf_boxes[leaf][3 + axis])});
           }
-        leaf_boxes[leaf][axis] = floatBelow((low - center[axis]) * scale) - margin;
-        leaf_boxes[leaf][3 + axis] = floatAbove((high - center[axis]) * scale) + margin;
-      }
-      blocks[leaf] = b;
-    }
-  });
-  refitSlotBoxes(nodes, [&](int32_t leaf, float lo[3], float hi[3]) {
+          blocks[leaf] = b;
+        }
+        return largest;
+      },
+      [](double a, double b) { return std::max(a, b); });
+  refitSlotBoxes(nodes, magnitude, [&](int32_t leaf, double lo[3], double hi[3]) {
     for (int axis = 0; axis < 3; ++axis) {
       lo[axis] = leaf_boxes[leaf][axis];
       hi[axis] = leaf_boxes[leaf][3 + axis];
@@ -362,9 +444,12 @@ std::string validateGeometry(const Hierarchy& h, const TreeGeometry& g) {
         for (uint32_t lane = 0; lane < h.leafLanes(leaf); ++lane) {
           for (VertexIndex v : mesh.triangles[lanes[8 * leaf + lane]]) {
             const Vec3& x = positions[v];
+            // Relative to the node's origin in long double: exact for any offset the float
+            // boxes can tell apart.
             const Vec3 scaled = (x - g.center) * g.box_scale;
             for (int axis = 0; axis < 3; ++axis) {
-              if (!(n.lower[axis][k] <= scaled[axis] && scaled[axis] <= n.upper[axis][k]))
+              const long double offset = static_cast<long double>(scaled[axis]) - n.origin[axis];
+              if (!(n.lower[axis][k] <= offset && offset <= n.upper[axis][k]))
                 return describe("box misses a subtree vertex", node, k);
             }
             const double d = std::sqrt(squaredDistanceToTriangle(x, a, b, cc));

@@ -31,14 +31,52 @@ inline bool isLeafRef(ChildRef c) { return c < 0 && c != kEmptyChild; }
 inline int32_t leafIndex(ChildRef c) { return ~c; }
 inline ChildRef leafRef(int32_t leaf) { return ~leaf; }
 
-// Eight children of one node, structure of arrays (352 bytes; 32-byte aligned for AVX loads).
+// Eight children of one node, structure of arrays (384 bytes with padding; 32-byte aligned for
+// AVX loads).
+// The boxes are stored in float relative to the node's own origin (scaled units, see
+// Hierarchy::boxScale()): a query point is rounded to float relative to that origin, so the
+// rounding, and the margin that covers it, scale with the node's size and not with the mesh's
+// extent (a small part far from the others keeps tight boxes). Write them with
+// packSlotBoxes(), read them back with slotBox().
 struct alignas(32) Node8 {
-  float lower[3][8];            // [axis][slot] subtree box, rounded down
-  float upper[3][8];            // [axis][slot] subtree box, rounded up (empty slot: lower > upper)
+  float lower[3][8];            // [axis][slot] subtree box - origin, rounded down
+  float upper[3][8];            // [axis][slot] subtree box - origin, rounded up (empty slot: +inf, -inf)
   ChildRef child[8];            // [slot]
   float eps[8];                 // [slot] swept-sphere radius of the slot's triangle, rounded up
   VertexIndex corner[3][8];     // [corner][slot] the slot's triangle (original vertex indices)
+  double origin[3];             // [axis] the boxes' origin (scaled units)
 };
+
+// A node's slot boxes in scaled double coordinates, before packing (empty slot: lower +inf,
+// upper -inf).
+struct SlotBoxes {
+  double lower[3][8];
+  double upper[3][8];
+};
+inline SlotBoxes emptySlotBoxes() {
+  SlotBoxes out;
+  for (int axis = 0; axis < 3; ++axis)
+    for (int k = 0; k < 8; ++k) {
+      out.lower[axis][k] = std::numeric_limits<double>::infinity();
+      out.upper[axis][k] = -std::numeric_limits<double>::infinity();
+    }
+  return out;
+}
+
+// Stores `boxes` in n relative to a new origin (the centre of their union), rounded
+// outward and widened by a margin that covers (a) the rounding of a query point to float
+// relative to that origin, up to a relative error the queries' box slack covers, and (b)
+// `slack`, an absolute error (scaled units) of the caller's own arithmetic in `boxes`.
+void packSlotBoxes(Node8& n, const SlotBoxes& boxes, double slack = 0);
+// Slot k's box in scaled double coordinates, rounded outward (it holds what the stored box
+// holds); an empty slot gives lower +inf, upper -inf.
+void slotBox(const Node8& n, int k, double lower[3], double upper[3]);
+// All of a node's slot boxes (slotBox for each slot).
+SlotBoxes slotBoxes(const Node8& n);
+// The bound on the absolute error (scaled units) of arithmetic on scaled coordinates as large
+// as `magnitude`: what packSlotBoxes() needs as `slack` when its boxes were computed from
+// origins and offsets of that size.
+inline double scaledRounding(double magnitude) { return magnitude * 0x1p-49; }
 
 
 // Drift by region: the faces are split into regions (nearby faces) whose boxes hold their faces
@@ -147,9 +185,10 @@ class Hierarchy {
   uint32_t leafLanes(int32_t leaf) const { return leaf_lanes_[leaf]; }
   const std::vector<uint8_t>& leafLaneCounts() const { return leaf_lanes_; }
 
-  // Node boxes are stored in float as (x - center()) * boxScale(), boxScale() a power of two
-  // that maps the mesh into [-1, 1]; they are rounded outward and widened by a margin so that
-  // float rounding of a query point never makes a box bound exceed the true distance.
+  // Node boxes are stored in float as (x - center()) * boxScale() - (the node's origin),
+  // boxScale() a power of two that maps the mesh into [-1, 1]; they are rounded outward and
+  // widened by a margin (packSlotBoxes()) so that float rounding of a query point never makes
+  // a box bound exceed the true distance.
   const Vec3& center() const { return center_; }
   double boxScale() const { return box_scale_; }
   // [vertex] some face that uses the vertex (kInvalidIndex for unused vertices).
@@ -208,10 +247,9 @@ LeafVertices leafVertices(const Hierarchy& h);
 // Moving geometry with inline faces: fills `blocks` (resized to h.leafCount()) with each leaf
 // block's faces at `positions` (one per mesh vertex), laid out as Hierarchy::leafBlocks(), and
 // rewrites every slot's box in `nodes` (a copy over h's layout) as the box of its subtree's
-// faces there, rounded outward, widened by boxMargin(extent); `extent` must bound the faces'
-// largest |scaled coordinate|. eps and the rest of each node are kept. The leaves in parallel
-// (TBB, in the caller's task arena), then one bottom-up pass.
-void refreshLeafBlocks(const Hierarchy& h, const Vec3* positions, double extent, std::vector<TriangleBlock8>& blocks,
+// faces there (packSlotBoxes()). eps and the rest of each node are kept. The leaves in
+// parallel (TBB, in the caller's task arena), then one bottom-up pass.
+void refreshLeafBlocks(const Hierarchy& h, const Vec3* positions, std::vector<TriangleBlock8>& blocks,
                        std::vector<Node8>& nodes);
 
 // How far each slot's bounds can be pushed when every vertex v moves at most w[v] (w >= 0,
@@ -223,9 +261,6 @@ void refreshLeafBlocks(const Hierarchy& h, const Vec3* positions, double extent,
 void slotDisplacements(const Hierarchy& h, const std::vector<double>& w, std::vector<double>& subtree,
                        std::vector<double>& corners, const LeafVertices* leaf_vertices = nullptr);
 
-// The float margin that covers query-point rounding for boxes whose scaled coordinates reach
-// `extent` in magnitude (see Hierarchy::boxScale()).
-float boxMargin(double extent);
 
 // Checks that the bounds of `geometry` (over h's layout) hold for its positions: every slot's
 // box contains its subtree's vertices and every eps bounds their distance to the slot's

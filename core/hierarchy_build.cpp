@@ -587,7 +587,7 @@ class HierarchyBuilder {
   template <class Emit>
   void splitFaces(FaceItem* first, FaceItem* last, size_t group, Emit&& emit) const;
   uint32_t addLeafBlock(const TriangleIndex* faces, size_t count);
-  void setSlot(Node8& node, int k, ChildRef child, const Triangle& corners, const Box& box) const;
+  void setSlot(Node8& node, int k, ChildRef child, const Triangle& corners, const Box& box);
   void computeRadii();
 
   const Mesh& mesh_;
@@ -596,6 +596,7 @@ class HierarchyBuilder {
   std::vector<uint32_t> child_begin_; // [raw node + 1] CSR into child_list_
   std::vector<int32_t> child_list_;
   Node8 empty_;                       // a node with eight empty slots
+  std::vector<SlotBoxes> slot_boxes_;  // [node] the slots' boxes (scaled), packed after the tree
   std::vector<Vec3> centroid_;        // [face] sum of its corners (3x the centroid)
   std::vector<int32_t> collect_stack_;  // collectFaces()' stack
   std::vector<FaceItem> items_;         // the faces spatialNode() regroups
@@ -732,16 +733,14 @@ uint32_t HierarchyBuilder::addLeafBlock(const TriangleIndex* faces, size_t count
 }
 
 void HierarchyBuilder::setSlot(Node8& node, int k, ChildRef child, const Triangle& corners,
-                               const Box& box) const {
-  // Scaled float coordinates, rounded outward, widened by a margin that covers the rounding
-  // of a query point to float (DESIGN.md section 1: conservative float boxes).
-  const float margin = boxMargin(1.0);
-  const float inf = std::numeric_limits<float>::infinity();
+                               const Box& box) {
+  // The box in scaled coordinates (packed relative to the node's origin once the tree is
+  // built: packSlotBoxes, DESIGN.md section 1: conservative float boxes).
+  const size_t index = static_cast<size_t>(&node - h_.nodes_.data());
+  if (slot_boxes_.size() <= index) slot_boxes_.resize(h_.nodes_.size(), emptySlotBoxes());
   for (int axis = 0; axis < 3; ++axis) {
-    const float lo = static_cast<float>((box.lower[axis] - h_.center_[axis]) * h_.box_scale_);
-    const float hi = static_cast<float>((box.upper[axis] - h_.center_[axis]) * h_.box_scale_);
-    node.lower[axis][k] = std::nextafter(lo, -inf) - margin;
-    node.upper[axis][k] = std::nextafter(hi, inf) + margin;
+    slot_boxes_[index].lower[axis][k] = (box.lower[axis] - h_.center_[axis]) * h_.box_scale_;
+    slot_boxes_[index].upper[axis][k] = (box.upper[axis] - h_.center_[axis]) * h_.box_scale_;
   }
   node.child[k] = child;
   for (int c = 0; c < 3; ++c) node.corner[c][k] = corners[c];
@@ -767,6 +766,7 @@ void HierarchyBuilder::collapse() {
   for (int k = 0; k < 8; ++k) {
     empty.child[k] = kEmptyChild;
     empty.eps[k] = 0;
+    if (k < 3) empty.origin[k] = 0;
     for (int c = 0; c < 3; ++c) empty.corner[c][k] = 0;
   }
   h_.nodes_.assign(1, empty);
@@ -905,6 +905,12 @@ void HierarchyBuilder::run(const BuildOptions& options) {
     tree_.roots.assign(1, top);
   }
   collapse();
+  // The boxes, relative to each node's origin; scaled coordinates (at most 1 in magnitude)
+  // were rounded once.
+  slot_boxes_.resize(h_.nodes_.size(), emptySlotBoxes());
+  for (size_t node = 0; node < h_.nodes_.size(); ++node)
+    packSlotBoxes(h_.nodes_[node], slot_boxes_[node], scaledRounding(1.0));
+  slot_boxes_ = {};
   stats.tree_seconds = secondsSince(tree_start);
 
   const auto bounds_start = Clock::now();

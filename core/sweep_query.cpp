@@ -35,9 +35,11 @@
 //   delta. Entries store bound + drift-at-computation, so the current bound is key - drift and
 //   the heap order never changes; a stale entry reaching the top is recomputed and pushed back.
 //
-// Float boxes are conservative: stored rounded outward and widened by a margin that covers the
-// rounding of the query point (hierarchy_build.cpp); the pruning threshold gets a relative slack
-// for the float arithmetic. Points farther than ~1e15 mesh radii from the mesh skip box pruning.
+// Float boxes are conservative: stored relative to their node's origin, rounded outward and
+// widened by a margin that covers the rounding of the query point relative to that origin
+// (packSlotBoxes); the pruning threshold gets a relative slack for the float arithmetic and the
+// query point's own rounding in double. Points farther than ~1e15 mesh radii from the mesh skip
+// box pruning.
 #include "core/sweep_query.h"
 
 #include <algorithm>
@@ -59,8 +61,9 @@ constexpr double kInf = std::numeric_limits<double>::infinity();
 constexpr double kBoxSlack = 1e-5;
 constexpr double kFarLimit = 1e15;
 
-// Squared distances, in the hierarchy's scaled float units, from q to the node's eight boxes.
-inline void boxDistances(const Node8& n, const float q[3], float out[8]) {
+// Squared distances, in the hierarchy's scaled float units, from q (relative to the node's
+// origin: nodePoint) to the node's eight boxes.
+inline void boxDistancesFrom(const Node8& n, const float q[3], float out[8]) {
 #if defined(__AVX__)
   __m256 acc = _mm256_setzero_ps();
   const __m256 zero = _mm256_setzero_ps();
@@ -112,28 +115,58 @@ inline void prefetchChild(const TreeGeometry& g, ChildRef ref) {
   for (int i = 0; i < lines; ++i) __builtin_prefetch(base + 64 * i);
 }
 
+}  // namespace
+
+// A query point in scaled double coordinates, and the bound `err` on their rounding (relative
+// 2^-52 of the largest, scaled units): a box bound from the computed point may fall short of
+// the true point's by that much.
 struct ScaledPoint {
-  float q[3];
+  double q[3];
+  double err;
   bool far;  // too far for float boxes: every box bound is taken as 0
 };
+
+namespace {
 
 ScaledPoint scalePoint(const TreeGeometry& g, const Vec3& p) {
   ScaledPoint s{};
   const Vec3 local = (p - g.center) * g.box_scale;
-  s.far = !(local.cwiseAbs().maxCoeff() < kFarLimit);
-  for (int axis = 0; axis < 3; ++axis) s.q[axis] = s.far ? 0.0f : static_cast<float>(local[axis]);
+  const double largest = local.cwiseAbs().maxCoeff();
+  s.far = !(largest < kFarLimit);
+  for (int axis = 0; axis < 3; ++axis) s.q[axis] = s.far ? 0.0 : local[axis];
+  s.err = s.far ? 0.0 : largest * 0x1p-50;
   return s;
 }
 
-// Float threshold in scaled units above which a box bound proves a squared distance > best2.
-inline float pruneThreshold(double best2, double scale2) {
-  const double t = best2 * scale2 * (1 + kBoxSlack);
+// The query point relative to a node's origin, rounded to float (off by at most 2^-24 of
+// |q - origin| per axis, which the node's margin and the box slack cover: packSlotBoxes).
+inline void nodePoint(const Node8& n, const ScaledPoint& sp, float qn[3]) {
+  for (int axis = 0; axis < 3; ++axis) qn[axis] = static_cast<float>(sp.q[axis] - n.origin[axis]);
+}
+
+// boxDistancesFrom at sp (0 for every box when sp is far); qn receives sp relative to the node.
+inline void boxDistances(const Node8& n, const ScaledPoint& sp, float out[8], float qn[3]) {
+  if (sp.far) {
+    std::fill(out, out + 8, 0.0f);
+    std::fill(qn, qn + 3, 0.0f);
+    return;
+  }
+  nodePoint(n, sp, qn);
+  boxDistancesFrom(n, qn, out);
+}
+
+// Float threshold in scaled units above which a box bound proves a squared distance > best2:
+// (sqrt(best2) scale + err)^2, with a relative slack for the float arithmetic of a box bound
+// (well below it).
+inline float pruneThreshold(double best2, double scale2, const ScaledPoint& sp) {
+  const double r = std::sqrt(best2 * scale2) + sp.err;
+  const double t = r * r * (1 + kBoxSlack);
   return t < 3e38 ? static_cast<float>(t) : kFloatInf;
 }
 
 // A lower bound, in mesh units, on the distance to anything inside a box with float bound d2.
-inline double boxLowerBound(float d2, double inv_scale) {
-  return std::sqrt(static_cast<double>(d2) * (1 - kBoxSlack)) * inv_scale;
+inline double boxLowerBound(float d2, double inv_scale, const ScaledPoint& sp) {
+  return std::max(0.0, std::sqrt(static_cast<double>(d2) * (1 - kBoxSlack)) - sp.err) * inv_scale;
 }
 
 // Whether a face at squared distance d2 (index f) comes before the best so far (squared
@@ -187,10 +220,10 @@ ClosestPoint upperAnswer(const Hierarchy& h, const Vec3* positions, const Triang
 
 // Lower bound from one slot: the larger of its box bound and d(p, slot triangle) - eps.
 double slotBound(const Node8& node, int k, const Vec3* positions, const Vec3& p, float box_d2,
-                 double inv_scale) {
+                 double inv_scale, const ScaledPoint& sp) {
   const double to_triangle = std::sqrt(squaredDistanceToTriangle(
       p, positions[node.corner[0][k]], positions[node.corner[1][k]], positions[node.corner[2][k]]));
-  return std::max(boxLowerBound(box_d2, inv_scale), to_triangle * (1 - 1e-12) - node.eps[k]);
+  return std::max(boxLowerBound(box_d2, inv_scale, sp), to_triangle * (1 - 1e-12) - node.eps[k]);
 }
 
 // The answer to a point that cannot be queried (beyond kMaxQueryCoordinate, or NaN): NaN, no
@@ -323,7 +356,8 @@ double QueryStream::depthFirst(const Vec3& p, double start2, double reach, Trian
     return r * r;
   };
   double gather2 = limit2();
-  float threshold = pruneThreshold(gather2, scale2);
+  float threshold = pruneThreshold(gather2, scale2, sp);
+  double threshold2 = gather2;  // the squared distance threshold was taken from
   // With reach > 0: the smallest box bound pruned and squared distance not gathered.
   float pruned_box = kFloatInf;
   double pruned_face2 = kInf;
@@ -372,16 +406,20 @@ double QueryStream::depthFirst(const Vec3& p, double start2, double reach, Trian
       } else {
         gather2 = best2;
       }
-      threshold = pruneThreshold(gather2, scale2);
+      if (gather2 != threshold2) {
+        threshold2 = gather2;
+        threshold = pruneThreshold(gather2, scale2, sp);
+      }
       continue;
     }
     const Node8& node = g.nodes[entry.ref];
     ++counters_.nodes_visited;
-    if (sp.far) std::fill(dist, dist + 8, 0.0f); else boxDistances(node, sp.q, dist);
+    float qn[3];
+    boxDistances(node, sp, dist, qn);
     // Children below the threshold, pushed farthest first so the closest is popped next. The
     // order key adds the distance to the box centre, which ranks boxes that hold the point.
     float order[8];
-    centerDistances(node, sp.q, dist, order);
+    centerDistances(node, qn, dist, order);
     StackEntry open[8];
     float open_key[8];
     int count = 0;
@@ -403,7 +441,7 @@ double QueryStream::depthFirst(const Vec3& p, double start2, double reach, Trian
   }
   if (reach > 0) {
     pruned_lower_ = std::sqrt(pruned_face2);
-    if (pruned_box < kFloatInf && !sp.far) pruned_lower_ = std::min(pruned_lower_, boxLowerBound(pruned_box, 1.0 / g.box_scale));
+    if (pruned_box < kFloatInf && !sp.far) pruned_lower_ = std::min(pruned_lower_, boxLowerBound(pruned_box, 1.0 / g.box_scale, sp));
   }
   return best2;
 }
@@ -992,7 +1030,8 @@ ClosestPoint QueryStream::closestWithin(const Vec3& p, double tolerance) {
     }
     const Node8& node = g.nodes[entry.ref];
     ++counters_.nodes_visited;
-    if (sp.far) std::fill(dist, dist + 8, 0.0f); else boxDistances(node, sp.q, dist);
+    float qn[3];
+    boxDistances(node, sp, dist, qn);
     for (int k = 0; k < 8; ++k) {
       if (node.child[k] == kEmptyChild) continue;
       for (int corner = 0; corner < 3; ++corner) {
@@ -1000,7 +1039,7 @@ ClosestPoint QueryStream::closestWithin(const Vec3& p, double tolerance) {
         const double d = (g.positions[v] - p).norm();
         if (d < upper) { upper = d; upper_vertex = v; upper_face = kInvalidIndex; }
       }
-      const double key = slotBound(node, k, g.positions, p, dist[k], inv_scale);
+      const double key = slotBound(node, k, g.positions, p, dist[k], inv_scale, sp);
       if (key < upper) {
         heap_.push_back({key, node.child[k], 8});
         std::push_heap(heap_.begin(), heap_.end(), before);
@@ -1072,10 +1111,11 @@ void QueryStream::kClosest(const Vec3& p, size_t k, std::vector<TriangleHit>& ou
     } else {
       const Node8& node = g.nodes[entry.ref];
       ++counters_.nodes_visited;
-      if (sp.far) std::fill(dist, dist + 8, 0.0f); else boxDistances(node, sp.q, dist);
+      float qn[3];
+      boxDistances(node, sp, dist, qn);
       for (int s = 0; s < 8; ++s) {
         if (node.child[s] == kEmptyChild) continue;
-        push({boxLowerBound(dist[s], inv_scale), node.child[s], 8});
+        push({boxLowerBound(dist[s], inv_scale, sp), node.child[s], 8});
       }
     }
     counters_.heap_max = std::max<uint32_t>(counters_.heap_max, static_cast<uint32_t>(heap_.size()));
@@ -1089,7 +1129,7 @@ void QueryStream::within(const Vec3& p, double d, std::vector<TriangleHit>& out)
   counters_ = {};
   if (!(d >= 0) || !inCoordinateRange(p, kMaxQueryCoordinate)) return;
   const ScaledPoint sp = scalePoint(g, p);
-  const float threshold = pruneThreshold(d * d, g.box_scale * g.box_scale);
+  const float threshold = pruneThreshold(d * d, g.box_scale * g.box_scale, sp);
   const TriangleIndex* lanes = h.leafTriangles().data();
   within_keys_.clear();
   within_hits_.clear();
@@ -1106,7 +1146,8 @@ void QueryStream::within(const Vec3& p, double d, std::vector<TriangleHit>& out)
     }
     const Node8& node = g.nodes[entry.ref];
     ++counters_.nodes_visited;
-    if (sp.far) std::fill(dist, dist + 8, 0.0f); else boxDistances(node, sp.q, dist);
+    float qn[3];
+    boxDistances(node, sp, dist, qn);
     for (int k = 0; k < 8; ++k) {
       if (node.child[k] != kEmptyChild && dist[k] <= threshold) stack_.push_back({node.child[k], dist[k]});
     }
@@ -1176,24 +1217,26 @@ void QueryStream::frontStart(const Vec3& p) {
   frontPush({0.0, 0.0, 0, -1, 0, 8});
 }
 
-double QueryStream::entryBound(const DriftEntry& e, const Vec3& p, const float q[3], bool far) const {
+double QueryStream::entryBound(const DriftEntry& e, const Vec3& p, const ScaledPoint& sp) const {
   const TreeGeometry& g = geometry();
   if (e.lane < 8) return hitOn(static_cast<TriangleIndex>(e.ref), p).distance;
   if (e.parent < 0) return 0;
   const Node8& node = g.nodes[e.parent];
   float box_d2 = 0;
-  if (!far) {
+  if (!sp.far) {
+    float q[3];
+    nodePoint(node, sp, q);
     for (int axis = 0; axis < 3; ++axis) {
       const float gap = std::max(std::max(node.lower[axis][e.slot] - q[axis], q[axis] - node.upper[axis][e.slot]), 0.0f);
       box_d2 += gap * gap;
     }
   }
-  return slotBound(node, e.slot, g.positions, p, box_d2, 1.0 / g.box_scale);
+  return slotBound(node, e.slot, g.positions, p, box_d2, 1.0 / g.box_scale, sp);
 }
 
 // Refines the front at p. Anytime (k == 0): until upper - lower <= tolerance. k closest: until
 // k fresh faces reach the top (they are written to *out and pushed back).
-void QueryStream::frontRefine(const Vec3& p, const float q[3], bool far, double& upper,
+void QueryStream::frontRefine(const Vec3& p, const ScaledPoint& sp, double& upper,
                               TriangleIndex& upper_face, VertexIndex& upper_vertex,
                               bool stop_at_tolerance, double tolerance, size_t k,
                               std::vector<TriangleHit>* out) {
@@ -1217,7 +1260,7 @@ void QueryStream::frontRefine(const Vec3& p, const float q[3], bool far, double&
       break;
     DriftEntry e = frontPop();
     if (e.drift_at < drift_) {  // stale: recompute at p and put back
-      const double bound = entryBound(e, p, q, far);
+      const double bound = entryBound(e, p, sp);
       ++coherence_.recomputed;
       if (e.lane < 8 && bound < upper) { upper = bound; upper_face = static_cast<TriangleIndex>(e.ref); upper_vertex = kInvalidIndex; }
       e.key = bound + drift_;
@@ -1259,7 +1302,8 @@ void QueryStream::frontRefine(const Vec3& p, const float q[3], bool far, double&
     }
     const Node8& node = g.nodes[e.ref];
     ++counters_.nodes_visited;
-    if (far) std::fill(dist, dist + 8, 0.0f); else boxDistances(node, q, dist);
+    float qn[3];
+    boxDistances(node, sp, dist, qn);
     for (int s = 0; s < 8; ++s) {
       if (node.child[s] == kEmptyChild) continue;
       for (int corner = 0; corner < 3; ++corner) {
@@ -1267,7 +1311,7 @@ void QueryStream::frontRefine(const Vec3& p, const float q[3], bool far, double&
         const double d = (g.positions[v] - p).norm();
         if (d < upper) { upper = d; upper_vertex = v; upper_face = kInvalidIndex; }
       }
-      const double bound = slotBound(node, s, g.positions, p, dist[s], inv_scale);
+      const double bound = slotBound(node, s, g.positions, p, dist[s], inv_scale, sp);
       frontPush({bound + drift_, drift_, node.child[s], e.ref, static_cast<uint8_t>(s), 8});
     }
     counters_.heap_max = std::max<uint32_t>(counters_.heap_max, static_cast<uint32_t>(front_.size()));
@@ -1310,7 +1354,7 @@ ClosestPoint QueryStream::closestWithinCoherent(const Vec3& p, double tolerance)
   double upper = kInf;
   TriangleIndex upper_face = kInvalidIndex;
   VertexIndex upper_vertex = kInvalidIndex;
-  frontRefine(p, sp.q, sp.far, upper, upper_face, upper_vertex, true, tolerance, 0, nullptr);
+  frontRefine(p, sp, upper, upper_face, upper_vertex, true, tolerance, 0, nullptr);
   TriangleHit hit;
   if (upper_face != kInvalidIndex) hit = hitOn(upper_face, p);
   ClosestPoint out = upperAnswer(h, g.positions, upper_face != kInvalidIndex ? &hit : nullptr,
@@ -1335,7 +1379,7 @@ void QueryStream::kClosestCoherent(const Vec3& p, size_t k, std::vector<Triangle
   double upper = kInf;
   TriangleIndex upper_face = kInvalidIndex;
   VertexIndex upper_vertex = kInvalidIndex;
-  frontRefine(p, sp.q, sp.far, upper, upper_face, upper_vertex, false, 0, k, &out);
+  frontRefine(p, sp, upper, upper_face, upper_vertex, false, 0, k, &out);
   // Front keys carry the drift offset, which can merge distances one ulp apart: order the
   // answer by the exact distances (ties by triangle index), as kClosest does, and keep k.
   std::sort(out.begin(), out.end(), hitBefore);

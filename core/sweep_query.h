@@ -120,6 +120,8 @@ struct FrontTriangle {
   bool face = false;
 };
 
+struct ScaledPoint;  // a query point as the node boxes read it (sweep_query.cpp)
+
 class QueryStream {
  public:
   explicit QueryStream(std::shared_ptr<const Hierarchy> hierarchy, CoherenceOptions options = {});
@@ -245,12 +247,12 @@ class QueryStream {
   void finishWithin(double d, std::vector<TriangleHit>& out);
   double depthFirst(const Vec3& p, double start2, double reach, TriangleIndex& best_face,
                     uint32_t capacity = 0);
-  double entryBound(const DriftEntry& e, const Vec3& p, const float q[3], bool far) const;
+  double entryBound(const DriftEntry& e, const Vec3& p, const ScaledPoint& sp) const;
   void frontStart(const Vec3& p);
   void frontMove(const Vec3& p);
   void frontPush(const DriftEntry& e);
   DriftEntry frontPop();
-  void frontRefine(const Vec3& p, const float q[3], bool far, double& upper, TriangleIndex& upper_face,
+  void frontRefine(const Vec3& p, const ScaledPoint& sp, double& upper, TriangleIndex& upper_face,
                    VertexIndex& upper_vertex, bool stop_at_tolerance, double tolerance, size_t k,
                    std::vector<TriangleHit>* out);
 

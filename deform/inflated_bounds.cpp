@@ -15,30 +15,11 @@
 
 namespace meshsweeper {
 
-namespace {
-
-// The largest |coordinate| of any used box (scaled units).
-double boxExtent(const std::vector<Node8>& nodes) {
-  double extent = 0;
-  for (const Node8& n : nodes)
-    for (int axis = 0; axis < 3; ++axis)
-      for (int k = 0; k < 8; ++k) {
-        if (n.child[k] == kEmptyChild) continue;
-        extent = std::max({extent, std::abs(static_cast<double>(n.lower[axis][k])),
-                           std::abs(static_cast<double>(n.upper[axis][k]))});
-      }
-  return extent;
-}
-
-}  // namespace
-
 DeformingBody::DeformingBody(std::shared_ptr<const Hierarchy> hierarchy)
     : hierarchy_(std::move(hierarchy)) {
   if (!hierarchy_) throw std::invalid_argument("DeformingBody: null hierarchy");
   const Hierarchy& h = *hierarchy_;
   anchor_nodes_ = h.nodes();
-  anchor_extent_ = boxExtent(anchor_nodes_);
-  extent_bound_ = anchor_extent_;
   inflated_nodes_ = anchor_nodes_;
   nodes_ = anchor_nodes_;
   anchor_positions_ = h.mesh().positions;
@@ -247,10 +228,9 @@ void DeformingBody::setInlineFaces(bool on) {
 
 // Inline faces at the current positions, and boxes refitted to them (the inflated boxes are
 // valid for any positions within the bounds; these are tighter, so fewer leaves are opened).
-// The current positions lie within the inflated boxes, so extent_bound_ bounds their extent.
 void DeformingBody::refreshInlineFaces() {
   if (!inlineFaces()) return;
-  refreshLeafBlocks(*hierarchy_, positions_.data(), extent_bound_, leaf_blocks_, nodes_);
+  refreshLeafBlocks(*hierarchy_, positions_.data(), leaf_blocks_, nodes_);
 }
 
 // Positions whose bounding-box diagonal (`diagonal`) exceeds the supported mesh size (core/mesh.h) would
@@ -282,8 +262,6 @@ void DeformingBody::anchor(const std::vector<Vec3>& positions) {
   refitBounds(*hierarchy_, anchor_positions_.data(), anchor_nodes_, radii_);
   if (!radii_)  // no radius phase: every radius unbounded (valid, it prunes nothing)
     for (Node8& n : anchor_nodes_) std::fill(std::begin(n.eps), std::end(n.eps), std::numeric_limits<float>::infinity());
-  anchor_extent_ = boxExtent(anchor_nodes_);
-  extent_bound_ = anchor_extent_;
   inflated_nodes_ = anchor_nodes_;
   nodes_ = anchor_nodes_;
   refreshInlineFaces();
@@ -327,36 +305,29 @@ void DeformingBody::inflate(const std::vector<double>& delta) {
   // How far each slot's subtree and corners may move (one bottom-up pass).
   if (leaf_vertices_.offsets.empty()) leaf_vertices_ = leafVertices(h);
   slotDisplacements(h, delta, subtree_, corners_, &leaf_vertices_);
-  float largest_grow = 0;
   for (size_t node = 0; node < anchor_nodes_.size(); ++node) {
     const Node8& a = anchor_nodes_[node];
     Node8& out = inflated_nodes_[node];
     out = a;
+    // Each box grown by its subtree's displacement, in scaled double coordinates, then packed
+    // again (its margin follows the grown offsets; the slack covers this arithmetic, relative
+    // 2^-53 of the largest coordinate).
+    SlotBoxes boxes = slotBoxes(a);
+    double magnitude = 0;
     for (int k = 0; k < 8; ++k) {
       if (a.child[k] == kEmptyChild) continue;
       const double worst = subtree_[8 * node + k];
       out.eps[k] = floatAtLeast((a.eps[k] + worst + corners_[8 * node + k]) * (1 + 1e-9));
-      const float grow = floatAtLeast(worst * scale);
-      largest_grow = std::max(largest_grow, grow);
+      const double grow = worst * scale;
       for (int axis = 0; axis < 3; ++axis) {
-        out.lower[axis][k] = a.lower[axis][k] - grow;
-        out.upper[axis][k] = a.upper[axis][k] + grow;
+        boxes.lower[axis][k] -= grow;
+        boxes.upper[axis][k] += grow;
+        magnitude = std::max({magnitude, std::abs(boxes.lower[axis][k]), std::abs(boxes.upper[axis][k])});
       }
     }
-  }
-  // Boxes reaching beyond the anchor's extent need a wider query-rounding margin (a bound on
-  // the new extent: the anchor's plus the largest growth).
-  const float margin = boxMargin(anchor_extent_ + largest_grow) - boxMargin(1.0);
-  if (margin > 0) {
-    for (Node8& n : inflated_nodes_)
-      for (int axis = 0; axis < 3; ++axis)
-        for (int k = 0; k < 8; ++k) {
-          n.lower[axis][k] -= margin;
-          n.upper[axis][k] += margin;
-        }
+    packSlotBoxes(out, boxes, scaledRounding(magnitude));
   }
   delta_ = delta;
-  extent_bound_ = anchor_extent_ + largest_grow;
   nodes_ = inflated_nodes_;
   // Current positions outside the new bounds fall back to the anchor positions.
   if (outside) {

@@ -95,11 +95,9 @@ class DeformingBody {
   std::vector<Node8> inflated_nodes_;   // inflated bounds: hold for any positions within delta_
   std::vector<Node8> nodes_;            // what queries read: inflated_nodes_, or with inline
                                         // faces the same with boxes refitted to positions_
-  double extent_bound_ = 0;             // bounds the largest |scaled coordinate| of positions_
   std::vector<Vec3> anchor_positions_;  // [vertex]
   std::vector<Vec3> positions_;         // [vertex] current
   std::vector<double> delta_;           // [vertex] displacement bounds
-  double anchor_extent_ = 0;            // largest |box coordinate| of anchor_nodes_
   std::vector<double> subtree_, corners_;  // inflate()'s per-slot displacements (reused)
   LeafVertices leaf_vertices_;             // built by the first inflate()
   std::vector<TriangleBlock8> leaf_blocks_;  // [leaf] faces at positions_ (setInlineFaces)

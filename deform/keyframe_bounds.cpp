@@ -4,8 +4,8 @@
 // x(s) = (1 - s) x0 + s x1, s in [0, 1].
 // - Boxes: for every axis, min_i x_i(s) >= (1 - s) min_i x0_i + s min_i x1_i (the minimum of a
 //   sum is at least the sum of the minima), and likewise for the maximum. So the linear
-//   interpolation of a slot's two frame boxes contains the slot's subtree vertices at s. Float
-//   rounding of the interpolation is covered by an extra margin.
+//   interpolation of a slot's two frame boxes contains the slot's subtree vertices at s. It is
+//   computed in double and packed again (packSlotBoxes), whose slack covers its rounding.
 // - Radii: let T(s) be the slot's triangle at s and x(s) one of its subtree vertices. Moving
 //   every corner of a triangle by at most D moves each of its points (a convex combination of
 //   the corners) by at most D, so dist(y, T(s)) <= dist(y, T(0)) + s * D_T, where D_T is the
@@ -42,13 +42,13 @@ KeyframeBody::KeyframeBody(std::shared_ptr<const Hierarchy> hierarchy,
       throw std::invalid_argument("KeyframeBody: frame " + std::to_string(f) +
                                   " spans more than the supported mesh size 1e50 (bounding-box diagonal)");
   }
-  double extent = 0;
   for (const auto& frame : frames_) {
     frame_nodes_.push_back(h.nodes());
     refitBounds(h, frame.data(), frame_nodes_.back(), true);
-    for (const Vec3& x : frame) extent = std::max(extent, ((x - h.center()) * h.boxScale()).cwiseAbs().maxCoeff());
+    std::vector<SlotBoxes>& boxes = frame_boxes_.emplace_back();
+    boxes.reserve(frame_nodes_.back().size());
+    for (const Node8& n : frame_nodes_.back()) boxes.push_back(slotBoxes(n));
   }
-  lerp_margin_ = boxMargin(extent);
 
   // Delta per slot and frame pair: corner displacement + subtree displacement (bottom-up).
   const auto& nodes = h.nodes();
@@ -89,25 +89,28 @@ void KeyframeBody::interpolatedBounds(double t, std::vector<Node8>& out_nodes) c
   if (out_nodes.size() != nodes_.size()) out_nodes = nodes_;  // children and slots; bounds below
   const std::vector<Node8>& a = frame_nodes_[f];
   const std::vector<Node8>& b = frame_nodes_[last == 0 ? 0 : f + 1];
-  const float inf = std::numeric_limits<float>::infinity();
-  const float ws = static_cast<float>(s), wr = 1.0f - ws;
+  const std::vector<SlotBoxes>& box_a = frame_boxes_[f];
+  const std::vector<SlotBoxes>& box_b = frame_boxes_[last == 0 ? 0 : f + 1];
+  const double wr = 1 - s;
   for (size_t node = 0; node < out_nodes.size(); ++node) {
     Node8& out = out_nodes[node];
     const Node8& na = a[node];
     const Node8& nb = b[node];
-    for (int axis = 0; axis < 3; ++axis) {
-      for (int k = 0; k < 8; ++k) {
-        out.lower[axis][k] = wr * na.lower[axis][k] + ws * nb.lower[axis][k] - lerp_margin_;
-        out.upper[axis][k] = wr * na.upper[axis][k] + ws * nb.upper[axis][k] + lerp_margin_;
-      }
-    }
+    // In scaled double coordinates, packed again: the slack covers this arithmetic (relative
+    // 2^-53 of the largest coordinate, a few times over).
+    SlotBoxes boxes = emptySlotBoxes();  // empty slots stay empty (0 * inf is NaN)
+    double magnitude = 0;
     for (int k = 0; k < 8; ++k) {
-      if (na.child[k] != kEmptyChild) continue;  // keep empty boxes empty (0 * inf is NaN)
+      if (na.child[k] == kEmptyChild) continue;
       for (int axis = 0; axis < 3; ++axis) {
-        out.lower[axis][k] = inf;
-        out.upper[axis][k] = -inf;
+        const double lo_a = box_a[node].lower[axis][k], lo_b = box_b[node].lower[axis][k];
+        const double hi_a = box_a[node].upper[axis][k], hi_b = box_b[node].upper[axis][k];
+        boxes.lower[axis][k] = wr * lo_a + s * lo_b;
+        boxes.upper[axis][k] = wr * hi_a + s * hi_b;
+        magnitude = std::max({magnitude, std::abs(lo_a), std::abs(lo_b), std::abs(hi_a), std::abs(hi_b)});
       }
     }
+    packSlotBoxes(out, boxes, scaledRounding(magnitude));
     if (last == 0) {
       std::copy(na.eps, na.eps + 8, out.eps);
       continue;

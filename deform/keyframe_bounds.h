@@ -46,10 +46,10 @@ class KeyframeBody {
   std::shared_ptr<const Hierarchy> hierarchy_;
   std::vector<std::vector<Vec3>> frames_;        // [frame][vertex]
   std::vector<std::vector<Node8>> frame_nodes_;  // [frame][node] exact bounds at the frame
+  std::vector<std::vector<SlotBoxes>> frame_boxes_;  // [frame][node] their boxes, scaled double
   std::vector<std::vector<float>> delta_;        // [frame pair][8 * node + slot] Delta, rounded up
   std::vector<Node8> nodes_;                     // bounds at time_
   std::vector<Vec3> positions_;
-  float lerp_margin_ = 0;
   TreeGeometry geometry_;
   double time_ = 0;
 };

@@ -801,6 +801,63 @@ TEST_CASE("key frames: bounds proven and queries exact at every time", "[deform]
   checkKeyframes(torus, 2, 30, 150, 0xfeed04);
 }
 
+TEST_CASE("deform: a part far from the rest keeps tight boxes when moving", "[deform][far-parts]") {
+  // Inflated, refreshed and interpolated boxes are packed relative to each node's origin, as the
+  // rest boxes are (Node8): a sphere 1e9 from a small part of its mesh is queried like a sphere
+  // alone, exactly, at every step.
+  Mesh mesh = scenes::concatenate({scenes::icosphere(3), scenes::icosphere(1, 0.5, Vec3(1e9, 0, 0))});
+  const auto h = Hierarchy::build(mesh);
+  const auto alone = Hierarchy::build(scenes::icosphere(3));
+  const std::vector<Vec3> points = scenes::nearSurfacePoints(scenes::icosphere(3), 300, 0.02, 77);
+  auto moved = [&](double t) {
+    std::vector<Vec3> x = mesh.positions;
+    for (Vec3& v : x) v += 0.004 * std::sin(5 * v.x() + 3 * v.y() + t) * Vec3(0.6, 0.3, 1.0).normalized();
+    return x;
+  };
+  // Faces tested per query near the sphere, and every answer against brute force.
+  auto run = [&](const TreeGeometry& g, const std::vector<Vec3>& positions) {
+    Mesh now = mesh;
+    now.positions = positions;
+    QueryStream stream(h);
+    stream.setGeometry(&g);
+    double tested = 0;
+    for (const Vec3& p : points) {
+      const ClosestPoint c = stream.closest(p);
+      const BruteHit truth = bruteForceClosest(now, p);
+      CHECK(std::abs(c.distance - truth.distance) <= 1e-12 * truth.distance + 1e-15);
+      tested += static_cast<double>(c.counters.triangles_tested);
+    }
+    return tested / static_cast<double>(points.size());
+  };
+  QueryStream rest(alone);
+  double tested_alone = 0;
+  for (const Vec3& p : points) tested_alone += static_cast<double>(rest.closest(p).counters.triangles_tested);
+  tested_alone /= static_cast<double>(points.size());
+  INFO("faces tested per query near the sphere alone: " << tested_alone);
+  for (bool inline_faces : {false, true}) {
+    INFO("deforming body, inline faces " << inline_faces);
+    DeformingBody body(h);
+    body.setInlineFaces(inline_faces);
+    body.inflate(0.005);
+    for (double t : {0.0, 1.0, 2.5}) {
+      const std::vector<Vec3> x = moved(t);
+      REQUIRE(body.setPositions(x).accepted);
+      CHECK(validateGeometry(*h, body.geometry()).empty());
+      const double tested = run(body.geometry(), x);
+      INFO("step " << t << ": faces tested per query " << tested);
+      CHECK(tested <= 3 * tested_alone + 16);  // inflated boxes are looser than exact ones
+    }
+  }
+  KeyframeBody keyframes(h, {mesh.positions, moved(1.0), moved(2.0)});
+  for (double t : {0.0, 0.5, 1.25, 2.0}) {
+    keyframes.setTime(t);
+    CHECK(validateGeometry(*h, keyframes.geometry()).empty());
+    const double tested = run(keyframes.geometry(), keyframes.positions());
+    INFO("key frames at " << t << ": faces tested per query " << tested);
+    CHECK(tested <= 3 * tested_alone + 16);
+  }
+}
+
 TEST_CASE("key frames: one frame", "[deform][keyframe]") {
   const Mesh mesh = scenes::torus(1.0, 0.3, 48, 24);
   const auto h = Hierarchy::build(mesh);

@@ -154,9 +154,10 @@ void checkCover(const Hierarchy& h, uint64_t seed) {
             return out.str();
           });
           const Vec3 scaled = (x - h.center()) * h.boxScale();
+          double lower[3], upper[3];
+          slotBox(n, s.slot, lower, upper);
           bool inside = true;
-          for (int axis = 0; axis < 3; ++axis)
-            inside = inside && n.lower[axis][s.slot] <= scaled[axis] && scaled[axis] <= n.upper[axis][s.slot];
+          for (int axis = 0; axis < 3; ++axis) inside = inside && lower[axis] <= scaled[axis] && scaled[axis] <= upper[axis];
           box.check(inside, [&] {
             return "open " + std::to_string(open) + ", face " + std::to_string(f) + ", point " +
                    text(x) + ", " + describeSlot(h, s);

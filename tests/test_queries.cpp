@@ -566,6 +566,52 @@ TEST_CASE("queries agree with brute force on procedural meshes", "[queries]") {
   }
 }
 
+TEST_CASE("queries: a part far from the rest of its mesh keeps tight boxes", "[queries][far-parts]") {
+  // Node boxes are float offsets from each node's own origin: a detailed part far from another
+  // part (a stray vertex of a scan, two objects in one file) keeps boxes as tight as alone. With
+  // offsets from the mesh's centre, the float margin grew with the mesh's extent, and at 1e9
+  // every box of the sphere below covered the whole sphere: each query tested its 5120 faces.
+  const Mesh sphere = scenes::icosphere(4);
+  const auto alone = Hierarchy::build(sphere);
+  const Budget budget{100, 20, 200, 100, 50, 50, 10};
+  const std::vector<PointSet> sets = pointSets(sphere, budget, 900);
+  auto meanTested = [&](const std::shared_ptr<const Hierarchy>& h) {
+    QueryStream stream(h);
+    double tested = 0;
+    size_t count = 0;
+    for (const PointSet& set : sets) {
+      if (set.kind == "far") continue;
+      for (const Vec3& p : set.points) {
+        tested += static_cast<double>(stream.closest(p).counters.triangles_tested);
+        ++count;
+      }
+    }
+    return tested / static_cast<double>(count);
+  };
+  const double tested_alone = meanTested(alone);
+  INFO("faces tested per query near the sphere alone: " << tested_alone);
+  struct Case {
+    const char* name;
+    std::vector<Vec3> offsets;  // a small icosphere at each
+  };
+  const std::vector<Case> cases = {{"one part at 1e9", {Vec3(1e9, 0, 0)}},
+                                   {"one part at -1e12 (y)", {Vec3(0, -1e12, 0)}},
+                                   {"parts at +-1e12", {Vec3(1e12, 0, 0), Vec3(-1e12, 0, 0)}},
+                                   {"parts at 3e7 and 1e11", {Vec3(3e7, 3e7, 0), Vec3(0, 0, 1e11)}}};
+  for (const Case& c : cases) {
+    std::vector<Mesh> parts = {sphere};
+    for (const Vec3& offset : c.offsets) parts.push_back(scenes::icosphere(1, 0.5, offset));
+    Mesh mesh = scenes::concatenate(parts);
+    mesh.name = std::string("icosphere(4) and ") + c.name;
+    const auto h = Hierarchy::build(mesh);
+    CHECK(validate(*h).empty());
+    runOracle(mesh, h, sets, 8, 8);  // exact against every face of the whole mesh
+    const double tested = meanTested(h);
+    INFO(mesh.name << ": faces tested per query near the sphere " << tested);
+    CHECK(tested <= 1.5 * tested_alone + 8);
+  }
+}
+
 TEST_CASE("queries: the centre of a finely tessellated sphere", "[queries][worst]") {
   // Every triangle is at nearly the same distance from the centre: the paper's worst case.
   const Mesh sphere = scenes::uvSphere(200, 400);
