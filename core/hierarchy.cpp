@@ -30,37 +30,41 @@ uint64_t nextGeometryVersion() {
 }
 
 void packSlotBoxes(Node8& n, const SlotBoxes& boxes, double slack) {
-  constexpr double inf = std::numeric_limits<double>::infinity();
-  double union_lo[3] = {inf, inf, inf}, union_hi[3] = {-inf, -inf, -inf};
   bool any = false;
+  for (int k = 0; k < 8; ++k) any = any || boxes.lower[0][k] <= boxes.upper[0][k];  // else empty (NaN: never a box)
+  // Any origin is valid. The median of the used slots' centres (per axis) sits among most of
+  // them: a node that holds a far-away part in one slot keeps the others' offsets small.
+  double centres[3][8];
+  int used_count = 0;
   for (int k = 0; k < 8; ++k) {
-    if (!(boxes.lower[0][k] <= boxes.upper[0][k])) continue;  // empty (or NaN: never a box)
-    any = true;
-    for (int axis = 0; axis < 3; ++axis) {
-      union_lo[axis] = std::min(union_lo[axis], boxes.lower[axis][k]);
-      union_hi[axis] = std::max(union_hi[axis], boxes.upper[axis][k]);
-    }
+    if (!(boxes.lower[0][k] <= boxes.upper[0][k])) continue;
+    for (int axis = 0; axis < 3; ++axis) centres[axis][used_count] = 0.5 * boxes.lower[axis][k] + 0.5 * boxes.upper[axis][k];
+    ++used_count;
   }
-  // Any origin is valid: the centre of the union keeps the offsets smallest.
-  for (int axis = 0; axis < 3; ++axis) n.origin[axis] = any ? 0.5 * union_lo[axis] + 0.5 * union_hi[axis] : 0.0;
+  for (int axis = 0; axis < 3; ++axis) {
+    double* c = centres[axis];
+    std::nth_element(c, c + used_count / 2, c + used_count);
+    n.origin[axis] = any ? c[used_count / 2] : 0.0;
+  }
   // Offsets from the origin (double: relative error 2^-53, which floatBelow/Above's relative
   // 2^-23 covers). A query point q is rounded to float as fl(q - origin), off by at most
-  // 2^-24 |q - origin| <= 2^-24 (gap to the box + largest offset) per axis: the gap's share
-  // is relative (the queries' box slack), the offset's is the margin below, 8 times over.
+  // 2^-24 |q - origin| <= 2^-24 (gap to slot k's box + slot k's largest offset) per axis: the
+  // gap's share is relative (the queries' box slack), the offset's is slot k's margin below,
+  // 8 times over.
   double offset_lo[3][8], offset_hi[3][8];
-  double largest = 0;
+  double largest[8] = {0, 0, 0, 0, 0, 0, 0, 0};
   for (int axis = 0; axis < 3; ++axis) {
     const double o = n.origin[axis];
     for (int k = 0; k < 8; ++k) {
       offset_lo[axis][k] = boxes.lower[axis][k] - o;
       offset_hi[axis][k] = boxes.upper[axis][k] - o;
       if (boxes.lower[0][k] <= boxes.upper[0][k])
-        largest = std::max({largest, std::abs(offset_lo[axis][k]), std::abs(offset_hi[axis][k])});
+        largest[k] = std::max({largest[k], std::abs(offset_lo[axis][k]), std::abs(offset_hi[axis][k])});
     }
   }
-  const double margin = largest * 0x1p-21 + slack;
   for (int k = 0; k < 8; ++k) {
     const bool used = boxes.lower[0][k] <= boxes.upper[0][k];
+    const double margin = largest[k] * 0x1p-21 + slack;
     for (int axis = 0; axis < 3; ++axis) {
       n.lower[axis][k] = used ? floatBelow(offset_lo[axis][k] - margin) : std::numeric_limits<float>::infinity();
       n.upper[axis][k] = used ? floatAbove(offset_hi[axis][k] + margin) : -std::numeric_limits<float>::infinity();
