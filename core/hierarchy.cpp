@@ -4,7 +4,6 @@
 #include <tbb/blocked_range.h>
 #include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
-#include <tbb/parallel_reduce.h>
 
 #include <algorithm>
 #include <array>
@@ -29,45 +28,46 @@ uint64_t nextGeometryVersion() {
   return ++counter;
 }
 
-void packSlotBoxes(Node8& n, const SlotBoxes& boxes, double slack) {
-  bool any = false;
-  for (int k = 0; k < 8; ++k) any = any || boxes.lower[0][k] <= boxes.upper[0][k];  // else empty (NaN: never a box)
-  // Any origin is valid. The median of the used slots' centres (per axis) sits among most of
-  // them: a node that holds a far-away part in one slot keeps the others' offsets small.
-  double centres[3][8];
+void packSlotBoxes(Node8& n, const SlotBoxes& boxes, double magnitude) {
+  bool used[8];
   int used_count = 0;
+  double centres[3][8];
   for (int k = 0; k < 8; ++k) {
-    if (!(boxes.lower[0][k] <= boxes.upper[0][k])) continue;
-    for (int axis = 0; axis < 3; ++axis) centres[axis][used_count] = 0.5 * boxes.lower[axis][k] + 0.5 * boxes.upper[axis][k];
+    used[k] = boxes.lower[0][k] <= boxes.upper[0][k];  // else empty (NaN: never a box)
+    if (!used[k]) continue;
+    for (int axis = 0; axis < 3; ++axis) {
+      centres[axis][used_count] = 0.5 * boxes.lower[axis][k] + 0.5 * boxes.upper[axis][k];
+      magnitude = std::max({magnitude, std::abs(boxes.lower[axis][k]), std::abs(boxes.upper[axis][k])});
+    }
     ++used_count;
   }
+  // Any origin is valid. The median of the used slots' centres (per axis) sits among most of
+  // them: a node that holds a far-away part in one slot keeps the others' offsets small.
   for (int axis = 0; axis < 3; ++axis) {
     double* c = centres[axis];
     std::nth_element(c, c + used_count / 2, c + used_count);
-    n.origin[axis] = any ? c[used_count / 2] : 0.0;
+    n.origin[axis] = used_count > 0 ? c[used_count / 2] : 0.0;
   }
+  // The boxes' own rounding, and the caller's: relative 2^-53 of the coordinates involved, 16
+  // times over.
+  const double slack = magnitude * 0x1p-49;
   // Offsets from the origin (double: relative error 2^-53, which floatBelow/Above's relative
   // 2^-23 covers). A query point q is rounded to float as fl(q - origin), off by at most
   // 2^-24 |q - origin| <= 2^-24 (gap to slot k's box + slot k's largest offset) per axis: the
   // gap's share is relative (the queries' box slack), the offset's is slot k's margin below,
   // 8 times over.
-  double offset_lo[3][8], offset_hi[3][8];
-  double largest[8] = {0, 0, 0, 0, 0, 0, 0, 0};
-  for (int axis = 0; axis < 3; ++axis) {
-    const double o = n.origin[axis];
-    for (int k = 0; k < 8; ++k) {
-      offset_lo[axis][k] = boxes.lower[axis][k] - o;
-      offset_hi[axis][k] = boxes.upper[axis][k] - o;
-      if (boxes.lower[0][k] <= boxes.upper[0][k])
-        largest[k] = std::max({largest[k], std::abs(offset_lo[axis][k]), std::abs(offset_hi[axis][k])});
-    }
-  }
+  constexpr float inf = std::numeric_limits<float>::infinity();
   for (int k = 0; k < 8; ++k) {
-    const bool used = boxes.lower[0][k] <= boxes.upper[0][k];
-    const double margin = largest[k] * 0x1p-21 + slack;
+    double offset_lo[3], offset_hi[3], largest = 0;
     for (int axis = 0; axis < 3; ++axis) {
-      n.lower[axis][k] = used ? floatBelow(offset_lo[axis][k] - margin) : std::numeric_limits<float>::infinity();
-      n.upper[axis][k] = used ? floatAbove(offset_hi[axis][k] + margin) : -std::numeric_limits<float>::infinity();
+      offset_lo[axis] = boxes.lower[axis][k] - n.origin[axis];
+      offset_hi[axis] = boxes.upper[axis][k] - n.origin[axis];
+      largest = std::max({largest, std::abs(offset_lo[axis]), std::abs(offset_hi[axis])});
+    }
+    const double margin = largest * 0x1p-21 + slack;
+    for (int axis = 0; axis < 3; ++axis) {
+      n.lower[axis][k] = used[k] ? floatBelow(offset_lo[axis] - margin) : inf;
+      n.upper[axis][k] = used[k] ? floatAbove(offset_hi[axis] + margin) : -inf;
     }
   }
 }
@@ -106,40 +106,34 @@ namespace {
 
 // Rewrites every used slot's box, children first (a child node always has a larger index than
 // its parent): a leaf slot's from leaf_box(leaf, lo, hi) (scaled double coordinates, holding
-// the leaf's faces), an inner slot's as the union of its child node's used slots; each node
-// packed with packSlotBoxes (slack: the rounding of scaled coordinates up to `magnitude`).
+// the leaf's faces), an inner slot's as the union of its child node's slots (kept in double,
+// before packing); each node packed with packSlotBoxes.
 template <class LeafBox>
-void refitSlotBoxes(std::vector<Node8>& nodes, double magnitude, LeafBox&& leaf_box) {
+void refitSlotBoxes(std::vector<Node8>& nodes, LeafBox&& leaf_box) {
   constexpr double inf = std::numeric_limits<double>::infinity();
-  const double slack = scaledRounding(magnitude);
+  std::vector<std::array<double, 6>> unions(nodes.size());  // [node] lower, upper
   for (size_t node = nodes.size(); node-- > 0;) {
     Node8& n = nodes[node];
     SlotBoxes boxes;
+    std::array<double, 6>& all = unions[node];
+    all = {inf, inf, inf, -inf, -inf, -inf};
     for (int k = 0; k < 8; ++k) {
       const ChildRef c = n.child[k];
       double lo[3] = {inf, inf, inf}, hi[3] = {-inf, -inf, -inf};
-      if (c == kEmptyChild) {
-        // empty: stays empty
-      } else if (isLeafRef(c)) {
+      if (isLeafRef(c)) {
         leaf_box(leafIndex(c), lo, hi);
-      } else {
-        const Node8& child = nodes[c];
-        for (int j = 0; j < 8; ++j) {
-          if (child.child[j] == kEmptyChild) continue;
-          double clo[3], chi[3];
-          slotBox(child, j, clo, chi);
-          for (int axis = 0; axis < 3; ++axis) {
-            lo[axis] = std::min(lo[axis], clo[axis]);
-            hi[axis] = std::max(hi[axis], chi[axis]);
-          }
-        }
+      } else if (c != kEmptyChild) {
+        std::copy_n(unions[c].begin(), 3, lo);
+        std::copy_n(unions[c].begin() + 3, 3, hi);
       }
       for (int axis = 0; axis < 3; ++axis) {
         boxes.lower[axis][k] = lo[axis];
         boxes.upper[axis][k] = hi[axis];
+        all[axis] = std::min(all[axis], lo[axis]);
+        all[3 + axis] = std::max(all[3 + axis], hi[axis]);
       }
     }
-    packSlotBoxes(n, boxes, slack);
+    packSlotBoxes(n, boxes);
   }
 }
 
@@ -151,13 +145,9 @@ void refitBounds(const Hierarchy& h, const Vec3* positions, std::vector<Node8>& 
   const double scale = h.boxScale();
   const float inf = std::numeric_limits<float>::infinity();
   // Leaf slots from their faces' vertices (refitSlotBoxes does the inner slots); unused lanes
-  // copy lane 0's corners, so all eight count. Scaled coordinates are rounded once (relative
-  // 2^-53 of their magnitude): the packing's slack.
+  // copy lane 0's corners, so all eight count.
   if (boxes) {
-    double magnitude = 0;
-    for (size_t v = 0; v < mesh.positions.size(); ++v)
-      magnitude = std::max(magnitude, ((positions[v] - h.center()) * scale).cwiseAbs().maxCoeff());
-    refitSlotBoxes(nodes, magnitude, [&](int32_t leaf, double lo[3], double hi[3]) {
+    refitSlotBoxes(nodes, [&](int32_t leaf, double lo[3], double hi[3]) {
       Vec3 low = Vec3::Constant(std::numeric_limits<double>::infinity()), high = -low;
       for (uint32_t lane = 0; lane < 8; ++lane) {
         for (VertexIndex v : corners[8 * static_cast<size_t>(leaf) + lane]) {
@@ -325,37 +315,29 @@ void refreshLeafBlocks(const Hierarchy& h, const Vec3* positions, std::vector<Tr
   const Vec3& center = h.center();
   blocks.resize(h.leafCount());
   // Each block is assembled on the stack and its box taken there (not read back afterwards:
-  // a large body's blocks do not stay in the caches). The boxes in scaled coordinates (each
-  // rounded once: the packing's slack, from the largest of them).
+  // a large body's blocks do not stay in the caches).
   std::vector<std::array<double, 6>> leaf_boxes(h.leafCount());
-  const double magnitude = tbb::parallel_reduce(
-      tbb::blocked_range<size_t>(0, blocks.size(), 256), 0.0,
-      [&](const tbb::blocked_range<size_t>& range, double largest) {
-        for (size_t leaf = range.begin(); leaf < range.end(); ++leaf) {
-          TriangleBlock8 b;
-          gatherLeafBlock(corners + 8 * leaf, positions, b);
-          // Unused lanes copy a used one, so all 8 lanes of each corner count.
-          for (int axis = 0; axis < 3; ++axis) {
-            double low = b.v[0][axis][0], high = low;
-            for (int corner = 0; corner < 3; ++corner)
-              for (int lane = 0; lane < 8; ++lane) {
-                low = std::min(low, b.v[corner][axis][lane]);
-                high = std::max(high, b.v[corner][axis][lane]);
-              }
-            leaf_boxes[leaf][axis] = (low - center[axis]) * scale;
-            leaf_boxes[leaf][3 + axis] = (high - center[axis]) * scale;
-            largest = std::max({largest, std::abs(leaf_boxes[leaf][axis]), std::abs(leaf_boxes[leaf][3 + axis])});
+  tbb::parallel_for(tbb::blocked_range<size_t>(0, blocks.size(), 256), [&](const tbb::blocked_range<size_t>& range) {
+    for (size_t leaf = range.begin(); leaf < range.end(); ++leaf) {
+      TriangleBlock8 b;
+      gatherLeafBlock(corners + 8 * leaf, positions, b);
+      // Unused lanes copy a used one, so all 8 lanes of each corner count.
+      for (int axis = 0; axis < 3; ++axis) {
+        double low = b.v[0][axis][0], high = low;
+        for (int corner = 0; corner < 3; ++corner)
+          for (int lane = 0; lane < 8; ++lane) {
+            low = std::min(low, b.v[corner][axis][lane]);
+            high = std::max(high, b.v[corner][axis][lane]);
           }
-          blocks[leaf] = b;
-        }
-        return largest;
-      },
-      [](double a, double b) { return std::max(a, b); });
-  refitSlotBoxes(nodes, magnitude, [&](int32_t leaf, double lo[3], double hi[3]) {
-    for (int axis = 0; axis < 3; ++axis) {
-      lo[axis] = leaf_boxes[leaf][axis];
-      hi[axis] = leaf_boxes[leaf][3 + axis];
+        leaf_boxes[leaf][axis] = (low - center[axis]) * scale;
+        leaf_boxes[leaf][3 + axis] = (high - center[axis]) * scale;
+      }
+      blocks[leaf] = b;
     }
+  });
+  refitSlotBoxes(nodes, [&](int32_t leaf, double lo[3], double hi[3]) {
+    std::copy_n(leaf_boxes[leaf].begin(), 3, lo);
+    std::copy_n(leaf_boxes[leaf].begin() + 3, 3, hi);
   });
 }
 

@@ -63,20 +63,17 @@ inline SlotBoxes emptySlotBoxes() {
   return out;
 }
 
-// Stores `boxes` in n relative to a new origin (the centre of their union), rounded
-// outward and widened by a margin that covers (a) the rounding of a query point to float
-// relative to that origin, up to a relative error the queries' box slack covers, and (b)
-// `slack`, an absolute error (scaled units) of the caller's own arithmetic in `boxes`.
-void packSlotBoxes(Node8& n, const SlotBoxes& boxes, double slack = 0);
+// Stores `boxes` in n relative to a new origin (the median of their centres), rounded outward
+// and widened by a margin that covers (a) the rounding of a query point to float relative to
+// that origin, up to a relative error the queries' box slack covers, and (b) the rounding of
+// the boxes' double coordinates: relative 2^-53 of the largest of them, or of `magnitude` when
+// the caller computed them from larger ones (scaled units).
+void packSlotBoxes(Node8& n, const SlotBoxes& boxes, double magnitude = 0);
 // Slot k's box in scaled double coordinates, rounded outward (it holds what the stored box
 // holds); an empty slot gives lower +inf, upper -inf.
 void slotBox(const Node8& n, int k, double lower[3], double upper[3]);
 // All of a node's slot boxes (slotBox for each slot).
 SlotBoxes slotBoxes(const Node8& n);
-// The bound on the absolute error (scaled units) of arithmetic on scaled coordinates as large
-// as `magnitude`: what packSlotBoxes() needs as `slack` when its boxes were computed from
-// origins and offsets of that size.
-inline double scaledRounding(double magnitude) { return magnitude * 0x1p-49; }
 
 
 // Drift by region: the faces are split into regions (nearby faces) whose boxes hold their faces

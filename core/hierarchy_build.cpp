@@ -905,11 +905,12 @@ void HierarchyBuilder::run(const BuildOptions& options) {
     tree_.roots.assign(1, top);
   }
   collapse();
-  // The boxes, relative to each node's origin; scaled coordinates (at most 1 in magnitude)
-  // were rounded once.
+  // The boxes, relative to each node's origin, with the slack of the whole mesh's scaled
+  // extent (at most 1): a surface point computed near a node holds in its box even where the
+  // node itself is a point (every vertex at one place).
   slot_boxes_.resize(h_.nodes_.size(), emptySlotBoxes());
   for (size_t node = 0; node < h_.nodes_.size(); ++node)
-    packSlotBoxes(h_.nodes_[node], slot_boxes_[node], scaledRounding(1.0));
+    packSlotBoxes(h_.nodes_[node], slot_boxes_[node], 1.0);
   slot_boxes_ = {};
   stats.tree_seconds = secondsSince(tree_start);
 

@@ -310,10 +310,10 @@ void DeformingBody::inflate(const std::vector<double>& delta) {
     Node8& out = inflated_nodes_[node];
     out = a;
     // Each box grown by its subtree's displacement, in scaled double coordinates, then packed
-    // again (its margin follows the grown offsets; the slack covers this arithmetic, relative
-    // 2^-53 of the largest coordinate).
+    // again (its margin follows the grown offsets; its slack, relative to the grown
+    // coordinates, covers this arithmetic: one of each slot's two grown bounds is at least
+    // `grow` in magnitude).
     SlotBoxes boxes = slotBoxes(a);
-    double magnitude = 0;
     for (int k = 0; k < 8; ++k) {
       if (a.child[k] == kEmptyChild) continue;
       const double worst = subtree_[8 * node + k];
@@ -322,10 +322,9 @@ void DeformingBody::inflate(const std::vector<double>& delta) {
       for (int axis = 0; axis < 3; ++axis) {
         boxes.lower[axis][k] -= grow;
         boxes.upper[axis][k] += grow;
-        magnitude = std::max({magnitude, std::abs(boxes.lower[axis][k]), std::abs(boxes.upper[axis][k])});
       }
     }
-    packSlotBoxes(out, boxes, scaledRounding(magnitude));
+    packSlotBoxes(out, boxes);
   }
   delta_ = delta;
   nodes_ = inflated_nodes_;

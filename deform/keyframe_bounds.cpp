@@ -96,8 +96,8 @@ void KeyframeBody::interpolatedBounds(double t, std::vector<Node8>& out_nodes) c
     Node8& out = out_nodes[node];
     const Node8& na = a[node];
     const Node8& nb = b[node];
-    // In scaled double coordinates, packed again: the slack covers this arithmetic (relative
-    // 2^-53 of the largest coordinate, a few times over).
+    // In scaled double coordinates, packed again: its slack covers this arithmetic (relative
+    // 2^-53 of the frames' coordinates, `magnitude`).
     SlotBoxes boxes = emptySlotBoxes();  // empty slots stay empty (0 * inf is NaN)
     double magnitude = 0;
     for (int k = 0; k < 8; ++k) {
@@ -110,7 +110,7 @@ void KeyframeBody::interpolatedBounds(double t, std::vector<Node8>& out_nodes) c
         magnitude = std::max({magnitude, std::abs(lo_a), std::abs(lo_b), std::abs(hi_a), std::abs(hi_b)});
       }
     }
-    packSlotBoxes(out, boxes, scaledRounding(magnitude));
+    packSlotBoxes(out, boxes, magnitude);
     if (last == 0) {
       std::copy(na.eps, na.eps + 8, out.eps);
       continue;
