@@ -173,6 +173,8 @@ class QueryStream {
   // answer as closest() when that is within max_distance (up to a relative 1e-12 and 1e-15 of
   // the mesh's size: the rounding of a computed distance), else no face
   // (triangle kInvalidIndex, distance +infinity), found or certified without looking farther.
+  // A negative or NaN max_distance counts as 0: only a face the point lies on (distance 0, up
+  // to that rounding) is an answer; lower is then 0.
   ClosestPoint closestCoherent(const Vec3& p, CoherentState& state, bool* certified = nullptr,
                                double max_distance = std::numeric_limits<double>::infinity());
 
