@@ -1,6 +1,9 @@
-// The command-line tool's output files (tools/cli.h, Output): written beside the destination
-// and renamed over it, so that a run that fails, throws or is interrupted leaves an existing
-// file as it was and no temporary file behind.
+// The command-line tool's output files (tools/cli.h, Output) and the scenes' pictures
+// (scenes::Image::writePng): written beside the destination and renamed over it, so that a run
+// that fails, throws or is interrupted leaves an existing file as it was and no temporary file
+// behind.
+#include "core/mesh.h"
+#include "scenes/render.h"
 #include "tools/cli.h"
 
 #include <catch2/catch.hpp>
@@ -197,3 +200,71 @@ TEST_CASE("output: a write that fails is reported by close()", "[cli][output]") 
   CHECK_THROWS_AS(out.close(), IoError);
 }
 #endif
+
+// ---- Pictures (scenes::Image::writePng) -----------------------------------------------------
+
+namespace {
+ino_t inode(const std::string& path) {
+  struct stat st {};
+  REQUIRE(::stat(path.c_str(), &st) == 0);
+  return st.st_ino;
+}
+bool isPng(const std::string& bytes) { return bytes.size() > 8 && bytes.compare(0, 8, "\x89PNG\r\n\x1a\n") == 0; }
+}  // namespace
+
+TEST_CASE("png: written whole beside the destination, renamed over it, permissions kept", "[cli][output][png]") {
+  using meshsweeper::scenes::Image;
+  Scratch s("png");
+  Image image(16, 8, meshsweeper::scenes::Colour(0.2, 0.4, 0.6));
+  const std::string file = s.path("picture.png");
+  const mode_t mask = ::umask(022);
+  image.writePng(file);
+  CHECK(permissions(file) == 0644);
+  CHECK(isPng(readFile(file)));
+  CHECK(s.names() == std::vector<std::string>{"picture.png"});  // no temporary file left
+  // An existing picture is replaced by a new file (a rename: never half written) that keeps its
+  // permissions.
+  ::chmod(file.c_str(), 0640);
+  writeFile(file, "old");
+  const ino_t before = inode(file);
+  image.writePng(file);
+  ::umask(mask);
+  CHECK(inode(file) != before);
+  CHECK(permissions(file) == 0640);
+  CHECK(isPng(readFile(file)));
+  // A file with two names is written in place (a rename would part them).
+  fs::create_hard_link(file, s.dir / "second.png");
+  writeFile(file, "old");
+  const ino_t shared = inode(file);
+  image.writePng(file);
+  CHECK(inode(file) == shared);
+  CHECK(isPng(readFile(s.path("second.png"))));
+  fs::remove(s.dir / "second.png");
+  // A link is written through: the link stays, its target is the picture.
+  fs::create_directories(s.dir / "sub");
+  fs::create_symlink("sub/target.png", s.dir / "link.png");
+  image.writePng(s.path("link.png"));
+  CHECK(fs::is_symlink(s.dir / "link.png"));
+  CHECK(isPng(readFile(s.path("sub/target.png"))));
+  CHECK(s.names() == std::vector<std::string>{"link.png", "picture.png", "sub"});
+}
+
+TEST_CASE("png: a destination that cannot be written is named in the error and left as it was", "[cli][output][png]") {
+  using meshsweeper::scenes::Image;
+  Scratch s("png_refused");
+  Image image(4, 4);
+  CHECK_THROWS_WITH(image.writePng(s.path("no/such/dir/p.png")),
+                    Catch::Contains("no/such/dir/p.png: cannot write PNG (No such file or directory)"));
+  fs::create_directories(s.dir / "taken.png");
+  CHECK_THROWS_AS(image.writePng(s.path("taken.png")), meshsweeper::MeshError);
+  CHECK(fs::is_directory(s.dir / "taken.png"));
+  if (::geteuid() != 0) {  // root writes anyway
+    const std::string locked = s.path("locked.png");
+    writeFile(locked, "keep");
+    ::chmod(locked.c_str(), 0444);
+    CHECK_THROWS_WITH(image.writePng(locked), Catch::Contains("locked.png: cannot write PNG (Permission denied)"));
+    CHECK(readFile(locked) == "keep");
+  }
+  // No temporary file is left by any of them.
+  for (const std::string& name : s.names()) CHECK(name.find(".partial-") == std::string::npos);
+}
