@@ -143,6 +143,13 @@ bool parseInteger(std::string_view word, std::int64_t& value) {
   return ec == std::errc() && ptr == end;
 }
 
+// Whether a word that parseInteger refused is an integer all the same, one too large for 64
+// bits (a sign, then digits only): its message then says "out of range", not "not an index".
+bool isHugeInteger(std::string_view word) {
+  if (!word.empty() && (word[0] == '+' || word[0] == '-')) word.remove_prefix(1);
+  return !word.empty() && std::all_of(word.begin(), word.end(), [](char c) { return c >= '0' && c <= '9'; });
+}
+
 std::string shown(std::string_view word) {
   constexpr std::size_t kShown = 40;
   std::string s(word.substr(0, kShown));
@@ -503,14 +510,24 @@ std::string checkObjFaces(const std::string& text) {
         const std::string_view corner = words[k];
         const std::size_t slash = corner.find('/');
         std::int64_t i = 0;
-        bool ok = parseInteger(corner.substr(0, slash), i);
+        const std::string_view vertex = corner.substr(0, slash);
+        bool ok = parseInteger(vertex, i);
+        if (!ok && isHugeInteger(vertex))
+          return at + " uses OBJ index " + shown(vertex) + ", out of range (the file has " + plural(vertices, "vertex") + ")";
         if (ok && slash != std::string_view::npos) {  // '/t', '//n' or '/t/n' after the vertex
           const std::string_view rest = corner.substr(slash + 1);
           const std::size_t second = rest.find('/');
           std::int64_t unused = 0;
           const std::string_view texture = rest.substr(0, second);
           ok = texture.empty() ? second != std::string_view::npos : parseInteger(texture, unused);
-          if (ok && second != std::string_view::npos) ok = parseInteger(rest.substr(second + 1), unused);
+          if (!ok && isHugeInteger(texture))
+            return at + ": " + shown(corner) + " has a texture index out of range (" + shown(texture) + ")";
+          if (ok && second != std::string_view::npos) {
+            const std::string_view normal = rest.substr(second + 1);
+            ok = parseInteger(normal, unused);
+            if (!ok && isHugeInteger(normal))
+              return at + ": " + shown(corner) + " has a normal index out of range (" + shown(normal) + ")";
+          }
         }
         if (!ok) return at + ": " + shown(corner) + " is not a vertex index ('v', 'v/t', 'v//n' or 'v/t/n')";
         if (i == 0) return at + ": OBJ index 0 is not valid (indices start at 1)";

@@ -985,6 +985,14 @@ TEST_CASE("readMesh refuses out-of-range indices and faces with fewer than 3 cor
              Contains("line 4: face 0 uses OBJ index 4 but the file has 3 vertices"));
   CHECK_THAT(readError(dir.write("range2.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\nf 1 2 9\n")),
              Contains("line 5: face 1 uses OBJ index 9 but the file has 3 vertices"));
+  // Indices past 64 bits are out of range, not malformed: the message says which index.
+  const std::string huge(300, '9');
+  CHECK_THAT(readError(dir.write("huge_v.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 -" + huge + " 3\n")),
+             Contains("line 4: face 0 uses OBJ index '-9999") && Contains("...', out of range (the file has 3 vertices)"));
+  CHECK_THAT(readError(dir.write("huge_t.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nf 1/" + huge + " 2 3\n")),
+             Contains("line 5: face 0: '1/9999") && Contains("has a texture index out of range ('9999"));
+  CHECK_THAT(readError(dir.write("huge_n.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1//+" + huge + " 2 3\n")),
+             Contains("line 4: face 0: '1//+9999") && Contains("has a normal index out of range ('+9999"));
   const std::string ply_start = "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\n"
                                 "property float y\nproperty float z\nelement face 1\n"
                                 "property list uchar int vertex_indices\nend_header\n"
