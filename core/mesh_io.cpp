@@ -232,13 +232,24 @@ std::string readOffWord(std::istream& in, std::size_t max_chars) {
 }
 
 // Reads a non-negative header count; false when the next word is not one.
-bool readOffCount(std::istream& in, std::uint64_t& count) {
+enum class OffCount { kOk, kInvalid, kTooLarge };
+OffCount readOffCount(std::istream& in, std::uint64_t& count) {
   const std::string digits = readOffWord(in, 32);
-  if (digits.empty() || digits.size() > 18) return false;
+  if (digits.empty()) return OffCount::kInvalid;
   for (char c : digits)
-    if (!std::isdigit(static_cast<unsigned char>(c))) return false;
+    if (!std::isdigit(static_cast<unsigned char>(c))) return OffCount::kInvalid;
+  // 18 digits at most (below 10^18, no overflow); a longer word (readOffWord cuts at 32) is a
+  // count no file could hold.
+  if (digits.size() > 18) return OffCount::kTooLarge;
   count = std::stoull(digits);
-  return true;
+  return OffCount::kOk;
+}
+
+// A header count's failure, named.
+void checkOffCount(const std::string& path, OffCount status, const char* what) {
+  if (status == OffCount::kTooLarge)
+    fail(path, std::string("the OFF header's ") + what + " count has more than 18 digits (out of range)");
+  if (status != OffCount::kOk) fail(path, std::string("the OFF header has no valid ") + what + " count");
 }
 
 // Parses the OFF header the way CGAL's File_header_OFF does and checks its counts against the
@@ -273,17 +284,20 @@ OffHeader checkOffHeader(const std::string& path, std::istream& in, std::uint64_
                  "OFF or PLY");
     fail(path, "the OFF header has no vertex count");
   }
-  if (!readOffCount(in, header.vertices)) fail(path, "the OFF header has no valid vertex count");
+  checkOffCount(path, readOffCount(in, header.vertices), "vertex");
   while (std::isspace(in.peek())) in.get();
   if (in.peek() == '#')  // CGAL's reader fails there
     fail(path, "the OFF header has a comment between its vertex and face counts (write the counts "
                "on one line, the comment after them)");
-  if (!readOffCount(in, header.faces)) fail(path, "the OFF header has no valid face count");
+  checkOffCount(path, readOffCount(in, header.faces), "face");
   // CGAL reads the edge count wherever it is, so a header without one swallows the first
   // coordinate; insist that it follows on the same line.
   while (isBlank(static_cast<char>(in.peek()))) in.get();
   std::uint64_t edges = 0;
-  if (!readOffCount(in, edges))
+  const OffCount edge_count = readOffCount(in, edges);
+  if (edge_count == OffCount::kTooLarge)
+    fail(path, "the OFF header's edge count has more than 18 digits (it is not read: write 0)");
+  if (edge_count != OffCount::kOk)
     fail(path, "the OFF header line with the vertex and face counts has no edge count (write "
                "'" + std::to_string(header.vertices) + " " + std::to_string(header.faces) +
                " 0')");
@@ -435,14 +449,19 @@ std::string checkOffBody(std::istream& in, const OffHeader& header) {
     const std::string where = "line " + std::to_string(line_number) + ": face " +
                               std::to_string(f);
     std::int64_t corners = 0;
-    if (!parseInteger(words[0], corners) || corners < 0)
+    if (!parseInteger(words[0], corners) || corners < 0) {
+      if (isHugeInteger(words[0]) && words[0][0] != '-')
+        return where + ": corner count " + shown(words[0]) + " is out of range";
       return where + ": " + shown(words[0]) + " is not a corner count";
+    }
     if (static_cast<std::uint64_t>(corners) + 1 > words.size())
       return where + " declares " + std::to_string(corners) + " corners but lists " +
              plural(words.size() - 1, "index");
     for (std::int64_t k = 1; k <= corners; ++k) {
       std::int64_t index = 0;
       if (!parseInteger(words[k], index)) {
+        if (isHugeInteger(words[k]))
+          return where + " uses vertex " + shown(words[k]) + " but the file has " + plural(header.vertices, "vertex");
         double value;
         if (parseDouble(words[k], value) == NumberStatus::kOk)
           return where + ": index " + shown(words[k]) + " is not an integer";
@@ -816,6 +835,8 @@ PlyHeader parsePlyHeader(const std::string& path, std::istream& in) {
       ended = true;
     } else if (words[0] == "element") {
       std::int64_t count = -1;
+      if (words.size() == 3 && isHugeInteger(words[2]) && words[2][0] != '-' && !parseInteger(words[2], count))
+        fail(path, at + "element " + shown(words[1]) + " count " + shown(words[2]) + " is out of range");
       if (words.size() != 3 || !parseInteger(words[2], count) || count < 0)
         fail(path, at + "expected 'element NAME COUNT'");
       header.elements.push_back({std::string(words[1]), static_cast<std::uint64_t>(count), {}});
@@ -1006,7 +1027,8 @@ bool nextPlyWord(std::streambuf& buffer, std::string& word) {
 // Checks that an ASCII PLY word is a value of the given type (integers in range, finite floats).
 std::string checkPlyValue(std::string_view word, const PlyType& type, std::int64_t& integer) {
   if (type.integer) {
-    if (!parseInteger(word, integer)) return shown(word) + " is not an integer";
+    if (!parseInteger(word, integer))
+      return shown(word) + (isHugeInteger(word) ? " is out of range for its type" : " is not an integer");
     const std::int64_t max = type.is_signed ? (std::int64_t(1) << (8 * type.bytes - 1)) - 1
                                             : (std::int64_t(1) << (8 * type.bytes)) - 1;
     const std::int64_t min = type.is_signed ? -max - 1 : 0;

@@ -932,6 +932,27 @@ TEST_CASE("readMesh refuses indices that are not integers, and data past the dec
     CHECK_THAT(readError(path), StartsWith(path + ": line 6: face 0: index '" + bad + "' is not an integer"));
   }
   CHECK_THAT(readError(dir.write("count.off", head + "3.5 0 1 2\n")), Contains("'3.5' is not a corner count"));
+  // Integers past 64 bits are integers out of range, and the message says so.
+  const std::string huge(300, '9');
+  CHECK_THAT(readError(dir.write("huge_index.off", head + "3 0 1 " + huge + "\n")),
+             Contains("line 6: face 0 uses vertex '9999") && Contains("...' but the file has 3 vertices"));
+  CHECK_THAT(readError(dir.write("huge_negative.off", head + "3 0 1 -" + huge + "\n")),
+             Contains("line 6: face 0 uses vertex '-9999"));
+  CHECK_THAT(readError(dir.write("huge_corners.off", head + huge + " 0 1 2\n")),
+             Contains("line 6: face 0: corner count '9999") && Contains("...' is out of range"));
+  CHECK_THAT(readError(dir.write("huge_vertices.off", "OFF\n" + huge + " 1 0\n")),
+             Contains("the OFF header's vertex count has more than 18 digits (out of range)"));
+  CHECK_THAT(readError(dir.write("huge_faces.off", "OFF\n3 " + huge + " 0\n")),
+             Contains("the OFF header's face count has more than 18 digits (out of range)"));
+  CHECK_THAT(readError(dir.write("huge_edges.off", "OFF\n3 1 " + huge + "\n")),
+             Contains("the OFF header's edge count has more than 18 digits"));
+  const std::string ply = "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\n"
+                          "property float z\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n"
+                          "0 0 0\n1 0 0\n0 1 0\n";
+  CHECK_THAT(readError(dir.write("huge_index.ply", ply + "3 0 1 " + huge + "\n")),
+             Contains("'vertex_indices': '9999") && Contains("...' is out of range for its type"));
+  CHECK_THAT(readError(dir.write("huge_count.ply", "ply\nformat ascii 1.0\nelement vertex " + huge + "\nend_header\n")),
+             Contains("PLY header line 3: element 'vertex' count '9999") && Contains("...' is out of range"));
   // A face the header does not count, or trailing text, is refused, not dropped.
   CHECK_THAT(readError(dir.write("more.off", "OFF\n4 1 0\n0 0 0\n1 0 0\n0 1 0\n5 5 5\n3 0 1 2\n3 1 2 3\n")),
              Contains("line 8: more data after the 1 face the header declares"));
