@@ -282,9 +282,9 @@ void DeformingBody::reanchor(const std::vector<Vec3>& positions) {
   geometry_.drift = grownDrift(drift, std::sqrt(moved2));
 }
 
-void DeformingBody::inflate(double delta) { inflate(std::vector<double>(positions_.size(), delta)); }
+bool DeformingBody::inflate(double delta) { return inflate(std::vector<double>(positions_.size(), delta)); }
 
-void DeformingBody::inflate(const std::vector<double>& delta) {
+bool DeformingBody::inflate(const std::vector<double>& delta) {
   checkSize(delta.size(), "the displacement bounds");
   // One pass: the bounds' validity (nothing changes if one is bad) and whether the current
   // positions stay within the new bounds.
@@ -336,6 +336,7 @@ void DeformingBody::inflate(const std::vector<double>& delta) {
   refreshInlineFaces();
   newRegionEpoch();  // the regions' boxes grew
   geometry_.version = nextGeometryVersion();
+  return outside;
 }
 
 DisplacementCheck DeformingBody::setPositions(const std::vector<Vec3>& positions) {

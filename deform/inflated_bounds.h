@@ -39,11 +39,12 @@ class DeformingBody {
   void reanchor(const std::vector<Vec3>& positions);
 
   // Every vertex v may move up to delta[v] (>= 0, finite) from the anchor positions: inflates all
-  // bounds in one bottom-up pass. Current positions outside the new bounds are reset to the
-  // anchor positions. Throws std::invalid_argument on a wrong size or a bad value.
-  void inflate(const std::vector<double>& delta);
+  // bounds in one bottom-up pass. If any current position lies outside the new bounds, every
+  // position is reset to the anchor positions (and coherent state starts over): returns
+  // whether that happened. Throws std::invalid_argument on a wrong size or a bad value.
+  bool inflate(const std::vector<double>& delta);
   // Same bound for every vertex.
-  void inflate(double delta);
+  bool inflate(double delta);
 
   // Accepts new positions if every vertex is within its bound of the anchor; otherwise keeps the
   // previous positions and reports the worst offender. Throws std::invalid_argument on a wrong

@@ -483,16 +483,18 @@ void checkInflated(const Mesh& mesh, size_t points, size_t path_steps, uint64_t 
 
     // Inflating more keeps the current positions (they are within the new bounds), then the
     // same displacement is accepted and exact.
-    body.inflate(1.6 * delta);
+    CHECK_FALSE(body.inflate(1.6 * delta));
     CHECK(body.positions() == accepted);
     const DisplacementCheck again = body.setPositions(big);
     CHECK(again.accepted);
     CHECK(body.positions() == big);
     checkBody(mesh, h, body, points, seed + 21, checks, bounds);
 
-    // Shrinking the bounds below the current displacement falls back to the anchor.
-    body.inflate(0.5 * delta);
+    // Shrinking the bounds below the current displacement falls back to the anchor, and says so.
+    const uint64_t lineage = body.geometry().lineage;
+    CHECK(body.inflate(0.5 * delta));
     CHECK(body.positions() == body.anchorPositions());
+    CHECK(body.geometry().lineage != lineage);  // coherent state starts over
     checkBody(mesh, h, body, points, seed + 22, checks, bounds);
 
     // Re-anchoring at the big displacement: exact bounds there, zero displacement bounds.
