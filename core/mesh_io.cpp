@@ -231,17 +231,19 @@ std::string readOffWord(std::istream& in, std::size_t max_chars) {
   return word;
 }
 
-// Reads a non-negative header count; false when the next word is not one.
+// Reads a non-negative header count: kInvalid when the next word is not one, kTooLarge when it
+// has more than 18 digits past its leading zeros (10^18 or more: no file holds that many).
 enum class OffCount { kOk, kInvalid, kTooLarge };
 OffCount readOffCount(std::istream& in, std::uint64_t& count) {
   const std::string digits = readOffWord(in, 32);
+  const bool cut = std::isalnum(in.peek());  // the word goes on past 32 characters
   if (digits.empty()) return OffCount::kInvalid;
   for (char c : digits)
     if (!std::isdigit(static_cast<unsigned char>(c))) return OffCount::kInvalid;
-  // 18 digits at most (below 10^18, no overflow); a longer word (readOffWord cuts at 32) is a
-  // count no file could hold.
-  if (digits.size() > 18) return OffCount::kTooLarge;
-  count = std::stoull(digits);
+  const std::size_t first = digits.find_first_not_of('0');
+  const std::size_t significant = first == std::string::npos ? 0 : digits.size() - first;
+  if (cut || significant > 18) return OffCount::kTooLarge;
+  count = significant == 0 ? 0 : std::stoull(digits.substr(first));
   return OffCount::kOk;
 }
 

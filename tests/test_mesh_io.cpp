@@ -946,6 +946,9 @@ TEST_CASE("readMesh refuses indices that are not integers, and data past the dec
              Contains("the OFF header's face count has more than 18 digits (out of range)"));
   CHECK_THAT(readError(dir.write("huge_edges.off", "OFF\n3 1 " + huge + "\n")),
              Contains("the OFF header's edge count has more than 18 digits"));
+  // Leading zeros are not digits of the count.
+  CHECK(meshsweeper::readMesh(dir.write("zeros.off", "OFF\n00000000000000000000003 0001 0\n" + head.substr(10) + "3 0 1 2\n"))
+            .triangles.size() == 1);
   const std::string ply = "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\n"
                           "property float z\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n"
                           "0 0 0\n1 0 0\n0 1 0\n";
