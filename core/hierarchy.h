@@ -75,7 +75,6 @@ void slotBox(const Node8& n, int k, double lower[3], double upper[3]);
 // All of a node's slot boxes (slotBox for each slot).
 SlotBoxes slotBoxes(const Node8& n);
 
-
 // Drift by region: the faces are split into regions (nearby faces) whose boxes hold their faces
 // for the whole epoch. Region r's running drift at level k, drift[2 * r + k], grows at each change
 // by how far the farthest vertex of any region whose box lies within width[k] of r's box moved.
@@ -257,7 +256,6 @@ void refreshLeafBlocks(const Hierarchy& h, const Vec3* positions, std::vector<Tr
 // vertices once.
 void slotDisplacements(const Hierarchy& h, const std::vector<double>& w, std::vector<double>& subtree,
                        std::vector<double>& corners, const LeafVertices* leaf_vertices = nullptr);
-
 
 // Checks that the bounds of `geometry` (over h's layout) hold for its positions: every slot's
 // box contains its subtree's vertices and every eps bounds their distance to the slot's

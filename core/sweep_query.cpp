@@ -100,7 +100,7 @@ inline void centerDistances(const Node8& n, const float q[3], const float box[8]
   }
 }
 
-// Starts loading a node (352 bytes) or leaf block (576 bytes) into cache.
+// Starts loading a node (384 bytes) or leaf block (576 bytes) into cache.
 inline void prefetchChild(const TreeGeometry& g, ChildRef ref) {
   const char* base;
   int lines;

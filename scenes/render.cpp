@@ -3,17 +3,15 @@
 // simplified write API, text from stb_easy_font's quads.
 #include "scenes/render.h"
 
-#include <png.h>
+#include "scenes/output_file.h"
 
-#include <sys/stat.h>
-#include <unistd.h>
+#include <png.h>
 
 #include <algorithm>
 #include <cerrno>
 #include <cmath>
 #include <cstdio>
 #include <cstring>
-#include <filesystem>
 #include <limits>
 
 // stb_easy_font is a header with static functions; it warns about unused ones.
@@ -300,8 +298,8 @@ void Image::writePng(const std::string& path) const {
   image.width = static_cast<png_uint_32>(width_);
   image.height = static_cast<png_uint_32>(height_);
   image.format = PNG_FORMAT_RGB;
-  // Encoded in memory first, then written beside the destination and renamed over it: a run
-  // that fails or is interrupted leaves an existing picture whole, never half written.
+  // Encoded in memory first, then written as a whole: a run that fails or is interrupted leaves
+  // an existing picture as it was, never half written.
   auto fail = [&](const std::string& why) {
     png_image_free(&image);
     return MeshError(path + ": cannot write PNG (" + why + ")");
@@ -311,54 +309,13 @@ void Image::writePng(const std::string& path) const {
   std::vector<png_byte> encoded(size);
   if (!png_image_write_to_memory(&image, encoded.data(), &size, 0, bytes.data(), 3 * width_, nullptr))
     throw fail(image.message);
-  // A new or existing regular file is replaced by a rename (it keeps its permissions; a symbolic
-  // link is written through); anything else (a device, a file with several names, a directory
-  // where no temporary file can be made) is written in place.
-  namespace fs = std::filesystem;
-  std::error_code ignored;
-  fs::path resolved = path;
-  for (int hop = 0; hop < 40 && fs::is_symlink(resolved, ignored); ++hop) {
-    const fs::path next = fs::read_symlink(resolved, ignored);
-    if (ignored) break;
-    resolved = next.is_absolute() ? next : resolved.parent_path() / next;
-  }
-  const std::string target = resolved.string();
-  struct stat st {};
-  const bool exists = ::stat(target.c_str(), &st) == 0;
-  // A rename would replace a file its owner made read-only.
-  if (exists && ::access(target.c_str(), W_OK) != 0) throw fail(std::strerror(errno));
-  mode_t mode = st.st_mode & 07777;
-  if (!exists) {
-    const mode_t mask = ::umask(0);
-    ::umask(mask);
-    mode = 0666 & ~mask;
-  }
-  std::string temporary;
-  int fd = -1;
-  struct stat link {};
-  const bool loop = ::lstat(target.c_str(), &link) == 0 && S_ISLNK(link.st_mode);  // fopen reports it
-  if (!loop && (!exists || (S_ISREG(st.st_mode) && st.st_nlink == 1))) {
-    temporary = target + ".partial-XXXXXX";
-    fd = ::mkstemp(temporary.data());
-    if (fd < 0) temporary.clear();
-  }
-  std::FILE* file = fd >= 0 ? ::fdopen(fd, "wb") : std::fopen(path.c_str(), "wb");
-  if (!file) {
-    const int error = errno;
-    if (fd >= 0) ::close(fd);
-    if (!temporary.empty()) ::unlink(temporary.c_str());
-    throw fail(std::strerror(error));
-  }
-  int error = 0;
-  if (std::fwrite(encoded.data(), 1, size, file) != size) error = errno ? errno : EIO;
-  if (std::fflush(file) != 0 && !error) error = errno ? errno : EIO;
-  if (!temporary.empty() && ::fchmod(fd, mode) != 0 && !error) error = errno;
-  if (std::fclose(file) != 0 && !error) error = errno ? errno : EIO;
-  if (!error && !temporary.empty() && ::rename(temporary.c_str(), target.c_str()) != 0) error = errno;
-  if (error) {
-    if (!temporary.empty()) ::unlink(temporary.c_str());
-    throw fail(std::strerror(error));
-  }
+  // Written as the tool's output files are (scenes/output_file.h): beside the destination,
+  // then renamed over it.
+  OpenOutput out;
+  if (const int error = openOutput(path, out)) throw fail(std::strerror(error));
+  const bool write_failed = std::fwrite(encoded.data(), 1, size, out.file) != size;
+  const int write_error = write_failed ? errno : 0;
+  if (const int error = finishOutput(out, write_failed)) throw fail(std::strerror(write_error ? write_error : error));
   png_image_free(&image);
 }
 

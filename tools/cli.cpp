@@ -186,71 +186,29 @@ double parseFiniteDouble(const std::string& text, const std::string& what) {
 Output::Output(const std::string& path) : path_(path.empty() ? "-" : path) {
   buffer_.reserve(kOutputBufferBytes);
   if (path_ == "-") {
-    file_ = stdout;
+    out_.file = stdout;
     return;
   }
-  const auto cannotOpen = [&](int error) {
-    return IoError(path_ + ": cannot open for writing: " + std::strerror(error));
-  };
-  const std::string target = outputDestination(path_).string();
-  struct stat st {};
-  const bool exists = ::stat(target.c_str(), &st) == 0;
-  // In place: not a regular file (a device, a pipe, a directory, which fopen refuses), one
-  // with other names that a rename would separate from it, or a link that leads nowhere (a
-  // loop, which fopen reports).
-  struct stat link {};
-  const bool in_place = (exists && (!S_ISREG(st.st_mode) || st.st_nlink > 1)) ||
-                  (::lstat(target.c_str(), &link) == 0 && S_ISLNK(link.st_mode));
-  if (!in_place) {
-    if (exists && ::access(target.c_str(), W_OK) != 0) throw cannotOpen(errno);
-    std::string name = target + ".partial-XXXXXX";
-    const int fd = ::mkstemp(name.data());
-    if (fd >= 0) {
-      file_ = ::fdopen(fd, "wb");
-      if (!file_) {
-        const int error = errno;
-        ::close(fd);
-        ::unlink(name.c_str());
-        throw cannotOpen(error);
-      }
-      owned_ = true;
-      temporary_ = name;
-      target_ = target;
-      if (exists) {
-        mode_ = st.st_mode & 07777;
-      } else {
-        const mode_t mask = ::umask(0);
-        ::umask(mask);
-        mode_ = 0666 & ~mask;
-      }
-      registerTemporary(temporary_);
-      return;
-    }
-    // No temporary beside it (a name at the length limit, or a writable file in a directory
-    // that is not): the file itself, as before.
-    const int error = errno;
-    if (!(error == ENAMETOOLONG || (exists && (error == EACCES || error == EPERM || error == EROFS))))
-      throw cannotOpen(error);
-  }
-  file_ = std::fopen(path_.c_str(), "wb");
-  if (!file_) throw cannotOpen(errno);
+  if (const int error = openOutput(path_, out_))
+    throw IoError(path_ + ": cannot open for writing: " + std::strerror(error));
   owned_ = true;
+  if (!out_.temporary.empty()) registerTemporary(out_.temporary);
 }
 
 Output::~Output() {
-  if (owned_ && file_) std::fclose(file_);
+  if (owned_ && out_.file) std::fclose(out_.file);
   discardTemporary();
 }
 
 void Output::discardTemporary() {
-  if (temporary_.empty()) return;
-  unregisterTemporary(temporary_);
-  ::unlink(temporary_.c_str());
-  temporary_.clear();
+  if (out_.temporary.empty()) return;
+  unregisterTemporary(out_.temporary);
+  ::unlink(out_.temporary.c_str());
+  out_.temporary.clear();
 }
 
 void Output::flushBuffer() {
-  if (!buffer_.empty() && std::fwrite(buffer_.data(), 1, buffer_.size(), file_) != buffer_.size())
+  if (!buffer_.empty() && std::fwrite(buffer_.data(), 1, buffer_.size(), out_.file) != buffer_.size())
     failed_ = true;
   buffer_.clear();
 }
@@ -275,41 +233,20 @@ void Output::printf(const char* format, ...) {
 
 void Output::close() {
   flushBuffer();
-  if (std::fflush(file_) != 0) failed_ = true;
-  if (owned_) {
-    // The permissions of the file replaced (or a new file's); a file system without them
-    // refusing is no failure of the write.
-    if (!temporary_.empty()) (void)::fchmod(::fileno(file_), static_cast<mode_t>(mode_));
-    if (std::fclose(file_) != 0) failed_ = true;
-    file_ = nullptr;
-    owned_ = false;
-  }
   const std::string name = path_ == "-" ? std::string("standard output") : path_;
-  if (failed_) {
-    discardTemporary();
-    throw IoError(name + ": write failed");
+  if (!owned_) {  // standard output
+    if (std::fflush(out_.file) != 0) failed_ = true;
+    if (failed_) throw IoError(name + ": write failed");
+    return;
   }
-  if (temporary_.empty()) return;
-  if (std::rename(temporary_.c_str(), target_.c_str()) != 0) {
-    const int error = errno;
-    discardTemporary();
-    throw IoError(name + ": cannot replace: " + std::strerror(error));
-  }
-  unregisterTemporary(temporary_);
-  temporary_.clear();
-}
-
-std::filesystem::path outputDestination(const std::string& name) {
-  namespace fs = std::filesystem;
-  std::error_code error;
-  fs::path path = fs::absolute(name, error);
-  for (int hop = 0; hop < 40 && fs::is_symlink(path, error); ++hop) {
-    const fs::path target = fs::read_symlink(path, error);
-    if (error) break;
-    path = target.is_absolute() ? target : path.parent_path() / target;
-  }
-  const fs::path canonical = fs::weakly_canonical(path, error);
-  return error ? path.lexically_normal() : canonical;
+  owned_ = false;
+  const std::string temporary = out_.temporary;
+  bool at_rename = false;
+  const int error = finishOutput(out_, failed_, &at_rename);  // removes the temporary if it fails
+  if (!temporary.empty()) unregisterTemporary(temporary);
+  out_.temporary.clear();
+  if (at_rename) throw IoError(name + ": cannot replace: " + std::strerror(error));
+  if (error) throw IoError(name + ": write failed");
 }
 
 std::string jsonString(const std::string& text) {

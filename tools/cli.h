@@ -5,6 +5,7 @@
 // Exit codes of the tool: 0 success, 1 an input or output file could not be read, parsed or
 // written (MeshError, IoError), 2 a bad command line (UsageError).
 #include "core/types.h"
+#include "scenes/output_file.h"
 
 #include <chrono>
 #include <cstdint>
@@ -101,20 +102,15 @@ class Output {
 
  private:
   std::string path_;
-  std::FILE* file_ = nullptr;
-  bool owned_ = false;
+  OpenOutput out_;       // the file (standard output, or opened by openOutput())
+  bool owned_ = false;   // opened here (not standard output), not yet closed
   std::string buffer_;
   bool failed_ = false;
-  std::string temporary_;    // the file written, renamed over target_ by close() ("": in place)
-  std::string target_;       // the destination, symbolic links followed
-  unsigned mode_ = 0;        // the permissions target_ gets
   void flushBuffer();
   void discardTemporary();
 };
 
-// The path a name leads to, symbolic links followed even when their target does not exist yet
-// (a dangling link is created through when written).
-std::filesystem::path outputDestination(const std::string& name);
+using meshsweeper::outputDestination;  // scenes/output_file.h
 
 // Wall-clock seconds since construction.
 class Timer {

@@ -1,0 +1,84 @@
+#include "scenes/output_file.h"
+
+#include <cerrno>
+
+#include <fcntl.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+namespace meshsweeper {
+
+std::filesystem::path outputDestination(const std::string& name) {
+  namespace fs = std::filesystem;
+  std::error_code error;
+  fs::path path = fs::absolute(name, error);
+  for (int hop = 0; hop < 40 && fs::is_symlink(path, error); ++hop) {
+    const fs::path target = fs::read_symlink(path, error);
+    if (error) break;
+    path = target.is_absolute() ? target : path.parent_path() / target;
+  }
+  const fs::path canonical = fs::weakly_canonical(path, error);
+  return error ? path.lexically_normal() : canonical;
+}
+
+int openOutput(const std::string& path, OpenOutput& out) {
+  out = OpenOutput();
+  const std::string target = outputDestination(path).string();
+  struct stat st {};
+  const bool exists = ::stat(target.c_str(), &st) == 0;
+  // In place: not a regular file (a device, a pipe, a directory, which fopen refuses), one
+  // with other names that a rename would separate from it, or a link that leads nowhere (a
+  // loop, which fopen reports).
+  struct stat link {};
+  const bool in_place = (exists && (!S_ISREG(st.st_mode) || st.st_nlink > 1)) ||
+                        (::lstat(target.c_str(), &link) == 0 && S_ISLNK(link.st_mode));
+  if (!in_place) {
+    // A rename would replace a file its owner made read-only.
+    if (exists && ::access(target.c_str(), W_OK) != 0) return errno;
+    std::string name = target + ".partial-XXXXXX";
+    const int fd = ::mkstemp(name.data());
+    if (fd >= 0) {
+      out.file = ::fdopen(fd, "wb");
+      if (!out.file) {
+        const int error = errno;
+        ::close(fd);
+        ::unlink(name.c_str());
+        return error;
+      }
+      out.temporary = name;
+      out.target = target;
+      if (exists) {
+        out.mode = st.st_mode & 07777;
+      } else {
+        const mode_t mask = ::umask(0);
+        ::umask(mask);
+        out.mode = 0666 & ~mask;
+      }
+      return 0;
+    }
+    // No temporary beside it (a name at the length limit, or a writable file in a directory
+    // that is not): the file itself.
+    const int error = errno;
+    if (!(error == ENAMETOOLONG || (exists && (error == EACCES || error == EPERM || error == EROFS)))) return error;
+  }
+  out.file = std::fopen(path.c_str(), "wb");
+  return out.file ? 0 : errno;
+}
+
+int finishOutput(OpenOutput& out, bool write_failed, bool* at_rename) {
+  if (at_rename) *at_rename = false;
+  int error = write_failed ? EIO : 0;
+  if (std::fflush(out.file) != 0 && !error) error = errno ? errno : EIO;
+  if (!out.temporary.empty()) (void)::fchmod(::fileno(out.file), static_cast<mode_t>(out.mode));
+  if (std::fclose(out.file) != 0 && !error) error = errno ? errno : EIO;
+  out.file = nullptr;
+  if (!error && !out.temporary.empty() && std::rename(out.temporary.c_str(), out.target.c_str()) != 0) {
+    error = errno;
+    if (at_rename) *at_rename = true;
+  }
+  if (error && !out.temporary.empty()) ::unlink(out.temporary.c_str());
+  if (!error) out.temporary.clear();
+  return error;
+}
+
+}  // namespace meshsweeper
