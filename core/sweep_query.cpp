@@ -218,12 +218,23 @@ ClosestPoint upperAnswer(const Hierarchy& h, const Vec3* positions, const Triang
   return out;
 }
 
-// Lower bound from one slot: the larger of its box bound and d(p, slot triangle) - eps.
+// Lower bound from one slot: the larger of its box bound and d(p, slot triangle) - eps, less
+// the rounding of both distances (the one computed here and the build's, which eps carries):
+// relative 1e-12, and absolute kSlotRounding times the coordinates involved. A point on the
+// surface is computed up to about 20 eps of its coordinates away from it: with a relative
+// margin only, a slot holding a face at distance 0 (or one an ulp of the coordinates away)
+// could bound it from above, and the priority queries took a farther face first (found by an
+// audit: kClosestCoherent on meshes of duplicate and degenerate faces).
+constexpr double kSlotRounding = 256 * std::numeric_limits<double>::epsilon();
 double slotBound(const Node8& node, int k, const Vec3* positions, const Vec3& p, float box_d2,
                  double inv_scale, const ScaledPoint& sp) {
-  const double to_triangle = std::sqrt(squaredDistanceToTriangle(
-      p, positions[node.corner[0][k]], positions[node.corner[1][k]], positions[node.corner[2][k]]));
-  return std::max(boxLowerBound(box_d2, inv_scale, sp), to_triangle * (1 - 1e-12) - node.eps[k]);
+  const Vec3& a = positions[node.corner[0][k]];
+  const Vec3& b = positions[node.corner[1][k]];
+  const Vec3& c = positions[node.corner[2][k]];
+  const double to_triangle = std::sqrt(squaredDistanceToTriangle(p, a, b, c));
+  const double coordinates = p.cwiseAbs().cwiseMax(a.cwiseAbs()).cwiseMax(b.cwiseAbs()).cwiseMax(c.cwiseAbs()).maxCoeff();
+  return std::max(boxLowerBound(box_d2, inv_scale, sp),
+                  to_triangle * (1 - 1e-12) - kSlotRounding * coordinates - node.eps[k]);
 }
 
 // The answer to a point that cannot be queried (beyond kMaxQueryCoordinate, or NaN): NaN, no

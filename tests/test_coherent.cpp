@@ -975,3 +975,92 @@ TEST_CASE("coherent queries: kClosestCoherent's exact order", "[coherent]") {
   }
   CHECK(misordered == 0);
 }
+
+// Meshes of duplicate, near-duplicate (1e-9) and collinear vertices, repeated faces, at scales
+// from 1e-6 to 1e6 and far from the origin; points on faces, edges and vertices, a hair off
+// them, and in the box. The priority queries (kClosestCoherent, closestWithinCoherent,
+// closestWithin) bound a slot by its triangle's distance less eps: those bounds must cover the
+// rounding of a distance at the coordinates' size, or a face at distance 0 hides behind a
+// bound of 1e-16 (found by an audit: kClosestCoherent took a farther face first, or a tied one
+// of a higher index, about 1 query in 500 here).
+TEST_CASE("coherent queries: priority queries on meshes of degenerate and duplicate faces", "[coherent][degenerate]") {
+  Random random(2026);
+  size_t meshes = 0, queries = 0, k_wrong = 0, exact_wrong = 0, bracket_wrong = 0;
+  for (int it = 0; it < 300; ++it) {
+    const size_t vertex_count = 3 + random.index(30), face_count = 1 + random.index(50);
+    const double scale = std::pow(10.0, static_cast<double>(random.index(13)) - 6);
+    const double offset = random.index(3) == 0 ? std::pow(10.0, static_cast<double>(random.index(7))) * scale * 10 : 0.0;
+    Mesh mesh;
+    mesh.name = "degenerate " + std::to_string(it);
+    std::vector<Vec3>& x = mesh.positions;
+    while (x.size() < vertex_count) {
+      const size_t kind = random.index(5);
+      if (kind == 0 && !x.empty()) {
+        x.push_back(x[random.index(x.size())]);
+      } else if (kind == 1 && x.size() >= 2) {
+        const double t = random.uniform(-1, 1);
+        x.push_back(t * x[random.index(x.size())] + (1 - t) * x[random.index(x.size())]);
+      } else if (kind == 2 && !x.empty()) {
+        x.push_back(x[random.index(x.size())] + 1e-9 * Vec3(random.uniform(-1, 1), random.uniform(-1, 1), random.uniform(-1, 1)));
+      } else {
+        x.emplace_back(random.uniform(-1, 1), random.uniform(-1, 1), random.index(2) ? 0.0 : random.uniform(-1, 1));
+      }
+    }
+    for (Vec3& v : x) v = scale * v + Vec3(offset, 0.5 * offset, -offset);
+    for (size_t f = 0; f < face_count; ++f)
+      mesh.triangles.push_back({static_cast<VertexIndex>(random.index(vertex_count)),
+                                static_cast<VertexIndex>(random.index(vertex_count)),
+                                static_cast<VertexIndex>(random.index(vertex_count))});
+    if (random.index(4) == 0)
+      for (size_t f = 0; f < face_count / 2; ++f) mesh.triangles.push_back(mesh.triangles[random.index(face_count)]);
+    if (!checkMesh(mesh).empty()) continue;
+    ++meshes;
+    const auto h = Hierarchy::build(mesh);
+    QueryStream k_stream(h), exact_stream(h), plain(h);
+    const double diagonal = meshDiagonal(mesh);
+    for (int q = 0; q < 60; ++q) {
+      // On a face, an edge or a vertex, a hair off the surface, or anywhere in the box.
+      const Triangle& t = mesh.triangles[random.index(mesh.triangles.size())];
+      double b0 = random.uniform(), b1 = random.uniform();
+      if (b0 + b1 > 1) { b0 = 1 - b0; b1 = 1 - b1; }
+      const size_t where = random.index(5);
+      if (where == 1) b1 = 1 - b0;                 // an edge
+      if (where == 2) { b0 = 1; b1 = 0; }          // a vertex
+      Vec3 p = b0 * x[t[0]] + b1 * x[t[1]] + (1 - b0 - b1) * x[t[2]];
+      if (where == 3) p += 1e-9 * diagonal * Vec3(random.uniform(-1, 1), random.uniform(-1, 1), random.uniform(-1, 1));
+      if (where == 4) p = x[random.index(x.size())] + diagonal * Vec3(random.uniform(-1, 1), random.uniform(-1, 1), random.uniform(-1, 1));
+      ++queries;
+      const std::vector<BruteHit> truth = bruteForceKClosest(mesh, p, 3);
+      std::vector<TriangleHit> hits;
+      k_stream.kClosestCoherent(p, 3, hits);
+      bool same = hits.size() == truth.size();
+      for (size_t j = 0; same && j < hits.size(); ++j) same = hits[j].triangle == truth[j].triangle && hits[j].distance == truth[j].distance;
+      if (!same && ++k_wrong <= 3) {
+        std::ostringstream list;
+        for (size_t j = 0; j < std::min(hits.size(), truth.size()); ++j)
+          list << " [" << hits[j].triangle << " " << num(hits[j].distance) << " | " << truth[j].triangle << " " << num(truth[j].distance) << "]";
+        FAIL_CHECK(mesh.name << " " << text(p) << ": kClosestCoherent(p, 3) | brute force" << list.str());
+      }
+      const ClosestPoint exact = exact_stream.closestWithinCoherent(p, 0);
+      if (!(exact.triangle == truth[0].triangle && exact.distance == truth[0].distance && exact.lower <= exact.distance) &&
+          ++exact_wrong <= 3)
+        FAIL_CHECK(mesh.name << " " << text(p) << ": closestWithinCoherent(p, 0) triangle " << exact.triangle << " at "
+                             << num(exact.distance) << " (lower " << num(exact.lower) << "), brute force "
+                             << truth[0].triangle << " at " << num(truth[0].distance));
+      // The bounds bracket the truth up to the rounding of a distance (an upper bound is a face's
+      // computed distance: relative 1e-14 of brute force's, or a few ulps of the coordinates
+      // near 0).
+      const ClosestPoint anytime = plain.closestWithin(p, 0.01 * diagonal);
+      const double coordinates = std::max(std::abs(offset) + scale, p.cwiseAbs().maxCoeff());
+      const double slack = 1e-12 * truth[0].distance + 64 * std::numeric_limits<double>::epsilon() * coordinates;
+      if (!(anytime.lower <= truth[0].distance + slack && truth[0].distance <= anytime.upper + slack) && ++bracket_wrong <= 3)
+        FAIL_CHECK(mesh.name << " " << text(p) << ": closestWithin(p, 1% of the diagonal) [" << num(anytime.lower)
+                             << ", " << num(anytime.upper) << "], brute force " << num(truth[0].distance));
+    }
+  }
+  INFO(meshes << " meshes, " << queries << " queries");
+  CHECK(meshes > 200);
+  CHECK(k_wrong == 0);
+  CHECK(exact_wrong == 0);
+  CHECK(bracket_wrong == 0);
+}
