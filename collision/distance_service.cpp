@@ -1119,7 +1119,7 @@ std::vector<PositionsUpdate> DistanceService::setPositions(const std::vector<Bod
       const std::vector<Vec3>& held = plans[i].framed ? targets[i]->local_positions : *inputs[i];
       if (plans[i].framed && !inRange(held))
         problem[i] = " has a position beyond 1e150 in magnitude in the body's frame";
-      else if (!(positionsDiagonal(held) <= kMaxMeshSize))
+      else if (!withinMeshSize(targets[i]->shape->mesh(), held))
         problem[i] = " has positions spanning more than the supported mesh size 1e50";
     });
     for (size_t i = 0; i < batch.size(); ++i)

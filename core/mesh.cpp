@@ -40,16 +40,24 @@ std::string checkMesh(const Mesh& mesh) {
   return {};
 }
 
-void meshBounds(const Mesh& mesh, Vec3& lower, Vec3& upper) {
-  lower = Vec3::Constant(std::numeric_limits<double>::infinity());
-  upper = -lower;
-  for (const Triangle& t : mesh.triangles) {
+namespace {
+
+// The bounds of positions[v] over the vertices v of the triangles.
+void usedBounds(const std::vector<Triangle>& triangles, const std::vector<Vec3>& positions, Vec3& lower, Vec3& upper) {
+  Vec3 low = Vec3::Constant(std::numeric_limits<double>::infinity()), high = -low;
+  for (const Triangle& t : triangles) {
     for (VertexIndex v : t) {
-      lower = lower.cwiseMin(mesh.positions[v]);
-      upper = upper.cwiseMax(mesh.positions[v]);
+      low = low.cwiseMin(positions[v]);
+      high = high.cwiseMax(positions[v]);
     }
   }
+  lower = low;
+  upper = high;
 }
+
+}  // namespace
+
+void meshBounds(const Mesh& mesh, Vec3& lower, Vec3& upper) { usedBounds(mesh.triangles, mesh.positions, lower, upper); }
 
 double triangleArea(const Mesh& mesh, size_t t) {
   const Triangle& f = mesh.triangles[t];
@@ -80,6 +88,17 @@ double positionsDiagonal(const std::vector<Vec3>& positions) {
   Vec3 lower, upper;
   positionsBounds(positions, lower, upper);
   return (upper - lower).stableNorm();  // no underflow to 0 below 1e-154, no overflow
+}
+
+double usedPositionsDiagonal(const Mesh& mesh, const std::vector<Vec3>& positions) {
+  if (mesh.triangles.empty()) return 0;
+  Vec3 lower, upper;
+  usedBounds(mesh.triangles, positions, lower, upper);
+  return (upper - lower).stableNorm();
+}
+
+bool withinMeshSize(const Mesh& mesh, const std::vector<Vec3>& positions) {
+  return positionsDiagonal(positions) <= kMaxMeshSize || usedPositionsDiagonal(mesh, positions) <= kMaxMeshSize;
 }
 
 double meshDiagonal(const Mesh& mesh) {

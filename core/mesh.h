@@ -40,9 +40,17 @@ double surfaceArea(const Mesh& mesh);
 
 // Axis-aligned bounds of all `positions` (lower = +inf, upper = -inf for none).
 void positionsBounds(const std::vector<Vec3>& positions, Vec3& lower, Vec3& upper);
-// The bounding-box diagonal of all `positions` (moved vertices: deform/ refuses positions whose
-// diagonal exceeds kMaxMeshSize, as checkMesh refuses such meshes). 0 for none.
+// The bounding-box diagonal of all `positions`. 0 for none.
 double positionsDiagonal(const std::vector<Vec3>& positions);
+// The same over the vertices `mesh`'s triangles use (positions: one per vertex of the mesh,
+// e.g. moved ones), as meshDiagonal() measures the mesh: a vertex no triangle uses, which no
+// query sees, does not count. 0 for a mesh without triangles.
+double usedPositionsDiagonal(const Mesh& mesh, const std::vector<Vec3>& positions);
+// Whether moved `positions` (one per vertex of `mesh`) span at most kMaxMeshSize over the
+// vertices the triangles use: deform/ and the distance service refuse positions that do not,
+// as checkMesh refuses such a mesh. A pass over the positions; the triangles are read only
+// when all the positions span more (an unused vertex far away).
+bool withinMeshSize(const Mesh& mesh, const std::vector<Vec3>& positions);
 
 // Axis-aligned bounds of the vertices used by triangles. Precondition: checkMesh() passed.
 void meshBounds(const Mesh& mesh, Vec3& lower, Vec3& upper);

@@ -233,9 +233,13 @@ void DeformingBody::refreshInlineFaces() {
   refreshLeafBlocks(*hierarchy_, positions_.data(), leaf_blocks_, nodes_);
 }
 
-// Positions whose bounding-box diagonal (`diagonal`) exceeds the supported mesh size (core/mesh.h) would
-// overflow the exact distance: refused like a mesh of that size.
-void DeformingBody::checkExtent(double diagonal, const char* what) const {
+// Positions whose bounding-box diagonal exceeds the supported mesh size (core/mesh.h) over the
+// vertices the faces use would overflow the exact distance: refused like a mesh of that size.
+// `diagonal` is that of all the positions (computed by the caller's pass); only when it is too
+// large are the used vertices measured (a vertex no face uses may lie anywhere, as in a mesh).
+void DeformingBody::checkExtent(const std::vector<Vec3>& positions, double diagonal, const char* what) const {
+  if (!(diagonal > kMaxMeshSize)) return;
+  diagonal = usedPositionsDiagonal(hierarchy_->mesh(), positions);
   if (!(diagonal > kMaxMeshSize)) return;
   char span[32];
   std::snprintf(span, sizeof span, "%.3g", diagonal);
@@ -255,7 +259,7 @@ void DeformingBody::anchor(const std::vector<Vec3>& positions) {
     if (!inCoordinateRange(positions[v]))
       throw std::invalid_argument("DeformingBody: anchor position " + std::to_string(v) +
                                   " is not finite or beyond 1e150 in magnitude");
-  checkExtent(positionsDiagonal(positions), "positions");
+  checkExtent(positions, positionsDiagonal(positions), "positions");
   anchor_positions_ = positions;
   positions_ = positions;
   anchor_nodes_ = hierarchy_->nodes();
@@ -380,7 +384,7 @@ DisplacementCheck DeformingBody::setPositions(const std::vector<Vec3>& positions
     }
   }
   if (!check.accepted) return check;
-  checkExtent((upper - lower).stableNorm(), "positions");  // as positionsDiagonal()
+  checkExtent(positions, (upper - lower).stableNorm(), "positions");  // as positionsDiagonal()
   if (moved2 > 0) growRegionDrift(by_region, std::sqrt(moved2));
   positions_ = positions;
   refreshInlineFaces();

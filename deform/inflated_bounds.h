@@ -90,7 +90,7 @@ class DeformingBody {
 
  private:
   void checkSize(size_t count, const char* what) const;
-  void checkExtent(double diagonal, const char* what) const;
+  void checkExtent(const std::vector<Vec3>& positions, double diagonal, const char* what) const;
   std::shared_ptr<const Hierarchy> hierarchy_;
   std::vector<Node8> anchor_nodes_;     // exact bounds at the anchor positions
   std::vector<Node8> inflated_nodes_;   // inflated bounds: hold for any positions within delta_

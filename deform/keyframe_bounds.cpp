@@ -38,7 +38,7 @@ KeyframeBody::KeyframeBody(std::shared_ptr<const Hierarchy> hierarchy,
       if (!inCoordinateRange(frames_[f][v]))
         throw std::invalid_argument("KeyframeBody: frame " + std::to_string(f) + " vertex " +
                                     std::to_string(v) + " is not finite or beyond 1e150 in magnitude");
-    if (positionsDiagonal(frames_[f]) > kMaxMeshSize)
+    if (!withinMeshSize(h.mesh(), frames_[f]))
       throw std::invalid_argument("KeyframeBody: frame " + std::to_string(f) +
                                   " spans more than the supported mesh size 1e50 (bounding-box diagonal)");
   }

@@ -1521,3 +1521,39 @@ TEST_CASE("drift by region: new epochs", "[deform][regions]") {
   body.setRegionalDrift(true);
   CHECK(body.geometry().regions != nullptr);
 }
+
+// Found by an audit: checkMesh measures a mesh's size over the vertices its faces use, but the
+// deforming and key-framed bodies measured every position, so a mesh with an unused vertex at
+// 1e60 (valid input) was built, then refused by them. Unused vertices do not count now; used
+// ones spanning more than 1e50 are still refused.
+TEST_CASE("unused vertices far away do not count in a body's extent", "[deform][errors]") {
+  Mesh mesh = scenes::icosphere(2);
+  mesh.positions.emplace_back(1e60, 0, 0);  // used by no face
+  REQUIRE(checkMesh(mesh) == "");
+  const auto h = Hierarchy::build(mesh);
+  const size_t n = mesh.positions.size();
+  std::vector<Vec3> moved = mesh.positions;
+  for (size_t v = 0; v + 1 < n; ++v) moved[v] *= 1.01;
+
+  DeformingBody body(h);
+  CHECK_NOTHROW(body.anchor(mesh.positions));
+  body.inflate(0.05);
+  CHECK(body.setPositions(moved).accepted);
+  QueryStream stream(h);
+  stream.setGeometry(&body.geometry());
+  QueryChecks checks;
+  const Mesh now = withPositions(mesh, moved);
+  checkFreshQueries(now, stream, queryPoints(now, 40, 10, 4, 6), checks);
+
+  const KeyframeBody frames(h, {mesh.positions, moved});
+  CHECK(frames.frames().size() == 2);
+
+  // A used vertex at 1e60: the span is refused, by name.
+  std::vector<Vec3> wide = moved;
+  wide[0].x() = 1e60;
+  DeformingBody loose(h);
+  loose.inflate(1e61);
+  CHECK_THROWS_WITH(loose.setPositions(wide), Catch::Contains("supported mesh size"));
+  CHECK_THROWS_WITH(loose.anchor(wide), Catch::Contains("supported mesh size"));
+  CHECK_THROWS_WITH(KeyframeBody(h, {mesh.positions, wide}), Catch::Contains("supported mesh size"));
+}

@@ -1595,6 +1595,49 @@ TEST_CASE("batched setPositions: one measure of the span; entries may name a bat
   }
 }
 
+// Found by an audit: an unused vertex at 1e60 (valid input: checkMesh measures the used ones)
+// made addDeforming and addKeyframed refuse the mesh's own positions.
+TEST_CASE("unused vertices far away: deforming and key-framed bodies are accepted and exact", "[service][errors]") {
+  Mesh sphere = scenes::icosphere(3);
+  sphere.positions.emplace_back(1e60, 0, 0);  // used by no face
+  REQUIRE(checkMesh(sphere) == "");
+  for (const bool follow : {true, false}) {
+    INFO("follow_frames " << follow);
+    DistanceService service(ServiceOptions{1, 64, 2.0, 3.0, follow});
+    const auto h = service.hierarchyFor(sphere);
+    std::vector<Vec3> moved = sphere.positions;
+    for (size_t v = 0; v + 1 < moved.size(); ++v) moved[v] = 1.02 * moved[v] + Vec3(0.3, 0, 0);
+    const BodyHandle soft = service.addDeforming(h, 0.1);
+    const BodyHandle keyed = service.addKeyframed(h, {sphere.positions, moved}, 0.5);
+    std::vector<Vec3> keyed_now = sphere.positions;
+    for (size_t v = 0; v < keyed_now.size(); ++v) keyed_now[v] = 0.5 * (sphere.positions[v] + moved[v]);
+    for (size_t v = 0; v + 1 < moved.size(); ++v) moved[v] += Vec3(0, 0, 0.01);
+    CHECK_NOTHROW(service.setPositions(soft, moved));
+    Mesh soft_world = sphere, keyed_world = sphere;
+    soft_world.positions = moved;
+    keyed_world.positions = keyed_now;
+    PointMatrix points(50, 3);
+    scenes::Random random(9);
+    for (Eigen::Index i = 0; i < points.rows(); ++i)
+      points.row(i) = random.inBox(Vec3(-1.5, -1.5, -1.5), Vec3(1.8, 1.5, 1.5)).transpose();
+    const StepResult r = service.step(points, kInf, QueryMode::kWithin);
+    for (Eigen::Index i = 0; i < points.rows(); ++i) {
+      const Vec3 p = points.row(i).transpose();
+      const BruteHit a = bruteForceClosest(soft_world, p), b = bruteForceClosest(keyed_world, p);
+      double soft_best = kInf, keyed_best = kInf;
+      size_t strangers = 0;
+      for (const DistanceHit& hit : r.hits(static_cast<size_t>(i))) {
+        strangers += hit.body != soft && hit.body != keyed;
+        double& best = hit.body == soft ? soft_best : keyed_best;
+        best = std::min(best, hit.distance);
+      }
+      CHECK(strangers == 0);
+      CHECK(soft_best == Approx(a.distance).epsilon(1e-12));
+      CHECK(keyed_best == Approx(b.distance).epsilon(1e-12));
+    }
+  }
+}
+
 TEST_CASE("thread counts beyond 65536 are refused", "[service][errors]") {
   CHECK_THROWS_WITH(DistanceService(ServiceOptions{70000}), Catch::Contains("at most 65536"));
   const Mesh sphere = scenes::icosphere(2);
