@@ -621,14 +621,30 @@ void triangulatePolygon(const std::vector<Vec3>& x, std::vector<VertexIndex>& ri
     for (std::size_t i = 1; i + 1 < ring.size(); ++i) sum += (x[ring[i]] - o).cross(x[ring[i + 1]] - o);
     return sum.dot(normal);
   };
+  // Every test below is charged to the file's budget (`work` corner tests; false: it ran out):
+  // a self-crossing ring (a figure eight, whose lobes turn opposite ways) encloses nothing
+  // long before it is cut down, and each ear's area and spike checks then cost a pass over
+  // the ring (found by an audit: one 8000-corner figure eight took 30 s to read).
+  auto charge = [&](std::uint64_t work) {
+    if (work >= ear_work_left) {
+      ear_work_left = 0;
+      return false;
+    }
+    ear_work_left -= work;
+    return true;
+  };
   // Whether the ring's distinct edges fit in its ring.size() - 2 triangles; if so, appends them
-  // as degenerate triangles.
-  auto spikes = [&] {
+  // as degenerate triangles. `over` is set (and false returned) if the budget runs out.
+  auto spikes = [&](bool& over) {
     std::vector<std::pair<VertexIndex, VertexIndex>> edges;
     const std::size_t n = ring.size();
     for (std::size_t i = 0; i < n; ++i) {
       const VertexIndex p = ring[i], q = ring[(i + 1) % n];
       if (x[p] == x[q]) continue;
+      if (!charge(edges.size() + 1)) {
+        over = true;
+        return false;
+      }
       const bool seen = std::any_of(edges.begin(), edges.end(), [&](const auto& e) {
         return (x[e.first] == x[p] && x[e.second] == x[q]) || (x[e.first] == x[q] && x[e.second] == x[p]);
       });
@@ -645,14 +661,30 @@ void triangulatePolygon(const std::vector<Vec3>& x, std::vector<VertexIndex>& ri
   // Kept to fan the polygon whole if the budget runs out.
   const std::vector<VertexIndex> corners = ring;
   const std::size_t first_triangle = out.size();
+  auto fanWhole = [&] {
+    out.resize(first_triangle);
+    ring = corners;
+    fan();
+  };
   std::size_t from = 0;  // the search resumes next to the last ear: near-quadratic in all
+  double area = enclosed();
   while (ring.size() > 3) {
     const std::size_t n = ring.size();
     // A ring that encloses nothing more is what a pinched polygon leaves: spikes, each edge
     // traversed both ways, along the ears' edges or slits of the polygon. Any ear or fan
     // triangle cut from it would cover area outside the polygon: its edges become degenerate
     // triangles instead (k - 2 still, the last repeated).
-    if (!(enclosed() > 1e-12 * normal.squaredNorm()) && spikes()) return;
+    // The enclosed area is kept as ears are cut (each takes its own) and taken from the whole
+    // ring again only near zero, where it decides (a pass charged to the budget).
+    if (!(area > 1e-9 * normal.squaredNorm())) {
+      if (!charge(n)) return fanWhole();
+      area = enclosed();
+      if (!(area > 1e-12 * normal.squaredNorm())) {
+        bool over = false;
+        if (spikes(over)) return;
+        if (over) return fanWhole();
+      }
+    }
     bool cut = false;
     for (std::size_t step = 0; step < n && !cut; ++step) {
       const std::size_t i = (from + step) % n;
@@ -668,15 +700,10 @@ void triangulatePolygon(const std::vector<Vec3>& x, std::vector<VertexIndex>& ri
           empty = !enters(ring[(j + n - 1) % n], a, b, c, at) && !enters(ring[(j + 1) % n], a, b, c, at);
         }
       }
-      if (work >= ear_work_left) {
-        ear_work_left = 0;
-        out.resize(first_triangle);
-        ring = corners;
-        return fan();
-      }
-      ear_work_left -= work;
+      if (!charge(work)) return fanWhole();
       if (!empty) continue;
       out.push_back({a, b, c});
+      area -= (x[b] - x[a]).cross(x[c] - x[a]).dot(normal);
       ring.erase(ring.begin() + static_cast<std::ptrdiff_t>(i));
       from = i == 0 ? 0 : i - 1;
       cut = true;

@@ -472,6 +472,38 @@ TEST_CASE("polygons: ear cutting has a budget per file, past it non-convex polyg
   CHECK(is_fan(3));
 }
 
+TEST_CASE("polygons: a figure eight spends the budget on its area and spike checks", "[mesh_io]") {
+  // Found by an audit: a self-crossing polygon of 8000 corners (a lobe of radius 1 turning
+  // counter-clockwise, one of radius 0.7 clockwise, touching at the origin) took 16-36 s to
+  // read. Once its cut ring enclosed nothing (the lobes' areas cancel), every ear also
+  // re-measured the ring's area and its spikes, a pass or a quadratic scan over it, and the
+  // budget did not count them. Now it does: the budget runs out on this polygon, which is
+  // fanned whole, as a polygon during which it runs out is (README "Mesh input").
+  TempDir dir;
+  constexpr int kHalf = 4000;
+  std::string off = "OFF\n" + std::to_string(2 * kHalf) + " 1 0\n";
+  char line[128];
+  for (int i = 0; i < kHalf; ++i) {
+    const double a = M_PI + 2 * M_PI * i / kHalf;
+    std::snprintf(line, sizeof line, "%.17g %.17g 0\n", 1 + std::cos(a), std::sin(a));
+    off += line;
+  }
+  for (int i = 0; i < kHalf; ++i) {
+    const double a = 2 * M_PI * i / kHalf;
+    std::snprintf(line, sizeof line, "%.17g %.17g 0\n", -0.7 + 0.7 * std::cos(a), -0.7 * std::sin(a));
+    off += line;
+  }
+  off += std::to_string(2 * kHalf);
+  for (int i = 0; i < 2 * kHalf; ++i) off += " " + std::to_string(i);
+  off += "\n";
+  const Mesh mesh = meshsweeper::readMesh(dir.write("eight.off", off));
+  REQUIRE(mesh.triangles.size() == 2 * kHalf - 2);
+  bool fanned = true;
+  for (std::size_t j = 0; j + 2 < 2 * kHalf && fanned; ++j)
+    fanned = mesh.triangles[j] == Triangle{0, static_cast<meshsweeper::VertexIndex>(j + 1), static_cast<meshsweeper::VertexIndex>(j + 2)};
+  CHECK(fanned);
+}
+
 TEST_CASE("binary PLY, little and big endian, float and double coordinates", "[mesh_io]") {
   TempDir dir;
   for (const bool big : {false, true}) {
