@@ -38,6 +38,7 @@
 #include <charconv>
 #include <cmath>
 #include <cstdint>
+#include <cstdio>
 #include <array>
 #include <cstring>
 #include <map>
@@ -1405,7 +1406,33 @@ TextRepair textRepair(const std::string& path, std::istream& in, Format format, 
 
 }  // namespace
 
+namespace {
+
+// The reason of a read error that a stream buffer threw (std::ios_base::failure: a filebuf read
+// through sbumpc, not an istream function, throws instead of setting badbit): errno's text.
+std::string readError() {
+  const int code = errno;
+  return std::string("read error (") + (code != 0 ? std::strerror(code) : "I/O error") + ")";
+}
+
+Mesh readMeshFrom(const std::string& path);
+
+}  // namespace
+
+// A read error inside the readers' own loops (a device failing, /proc/self/mem) names the file
+// like every other error (found by an audit: the library's own message escaped).
 Mesh readMesh(const std::string& path) {
+  errno = 0;
+  try {
+    return readMeshFrom(path);
+  } catch (const std::ios_base::failure&) {
+    fail(path, readError());
+  }
+}
+
+namespace {
+
+Mesh readMeshFrom(const std::string& path) {
   std::ifstream file;
   std::uint64_t file_size = openInput(path, file);
   const Format format = formatOf(path);
@@ -1589,6 +1616,8 @@ Mesh readMesh(const std::string& path) {
   return mesh;
 }
 
+}  // namespace
+
 void writeOff(const Mesh& mesh, const std::string& path) {
   std::ofstream out(path, std::ios::out | std::ios::trunc);
   if (!out.is_open()) fail(path, std::string("cannot write the file (") + std::strerror(errno) + ")");
@@ -1633,12 +1662,19 @@ std::vector<Vec3> readPoints(const std::string& path) {
   // Lines are read with a cap: a file without line breaks (/dev/zero) would grow one without
   // end (found by review).
   constexpr std::size_t kMaxLine = std::size_t(1) << 20;
+  // A read error: a file's buffer throws it (a failing device, /proc/self/mem); standard input,
+  // read through C's stdin, ends as if at the end, with its error flag set (a directory, a
+  // closed descriptor). Either is reported, naming the input (found by an audit: standard
+  // input's was taken for its end, zero points).
   auto nextLine = [&] {
     try {
+      errno = 0;
       return nextDataLine(in, line, line_number, kMaxLine);
     } catch (const LineTooLong&) {
       throw MeshError(name + ":" + std::to_string(line_number + 1) + ": line longer than " +
                       std::to_string(kMaxLine) + " bytes (not a points file?)");
+    } catch (const std::ios_base::failure&) {
+      throw MeshError(name + ": " + readError());
     }
   };
   while (nextLine()) {
@@ -1664,7 +1700,7 @@ std::vector<Vec3> readPoints(const std::string& path) {
     }
     points.push_back(p);
   }
-  if (in.bad()) throw MeshError(name + ": read error");
+  if (in.bad() || (from_stdin && std::ferror(stdin))) throw MeshError(name + ": " + readError());
   return points;
 }
 

@@ -5,6 +5,7 @@
 
 #include <catch2/catch.hpp>
 
+#include <fcntl.h>
 #include <unistd.h>
 
 #include <cmath>
@@ -1125,6 +1126,34 @@ TEST_CASE("ASCII PLY: repeated properties refused, long values read whole", "[me
       "element face 1\nproperty list uchar int vertex_indices\nend_header\n"
       "0." + std::string(600, '0') + " 0 0\n1 0 0\n0 1 0\n3 0 1 2\n"));
   CHECK(mesh.positions == std::vector<Vec3>{{0, 0, 0}, {1, 0, 0}, {0, 1, 0}});
+}
+
+// Found by an audit: a read error on standard input (a directory, a closed descriptor) was
+// taken for its end (zero points, success), and one in a points file (/proc/self/mem fails its
+// first read) gave the C++ library's message without the file's name.
+TEST_CASE("readPoints: read errors name the input", "[mesh_io]") {
+  if (std::filesystem::exists("/proc/self/mem"))
+    CHECK_THROWS_WITH(meshsweeper::readPoints("/proc/self/mem"),
+                      Contains("/proc/self/mem: read error (Input/output error)"));
+  // Standard input that is a directory: every read fails (EISDIR).
+  std::fflush(stdout);
+  const int saved = dup(0);
+  const int directory = open("/", O_RDONLY | O_DIRECTORY);
+  REQUIRE(saved >= 0);
+  REQUIRE(directory >= 0);
+  REQUIRE(dup2(directory, 0) == 0);
+  std::string message;
+  try {
+    meshsweeper::readPoints("-");
+  } catch (const MeshError& e) {
+    message = e.what();
+  }
+  dup2(saved, 0);
+  close(saved);
+  close(directory);
+  std::clearerr(stdin);
+  std::cin.clear();
+  CHECK_THAT(message, Contains("<stdin>: read error (Is a directory)"));
 }
 
 TEST_CASE("readPoints: one point a line, comments and blank lines ignored", "[mesh_io]") {
