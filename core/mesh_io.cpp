@@ -511,6 +511,13 @@ std::string checkObjFaces(const std::string& text) {
     std::string line;
     std::uint64_t line_number = 0, face = 0, so_far = 0;
     while (nextDataLine(in, line, line_number)) {
+      // A CR inside a line: one CR-ended line among LF-ended ones, which CGAL's reader would
+      // take for one line, dropping what follows the CR (found by an audit: 'v 1 0 0\rv 5 5 5'
+      // lost a vertex).
+      const std::size_t cr = line.find('\r');
+      if (pass == 1 && cr != std::string::npos && line.find_first_not_of("\r ", cr) != std::string::npos)
+        return "line " + std::to_string(line_number) +
+               ": a CR inside the line (lines that end in CR alone among LF ones): convert them to LF or CRLF";
       const auto words = splitWords(line);
       if (words[0] == "v") {
         // CGAL reads coordinates with operator>>, which stops inside a word ('1-5' is 1 and

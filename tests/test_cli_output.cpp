@@ -268,3 +268,13 @@ TEST_CASE("png: a destination that cannot be written is named in the error and l
   // No temporary file is left by any of them.
   for (const std::string& name : s.names()) CHECK(name.find(".partial-") == std::string::npos);
 }
+
+// Found by an audit: a file name with a line break made a two-line error message; every error
+// is one line (README "Command-line tool").
+TEST_CASE("error messages are one line: control characters escaped", "[cli]") {
+  using meshsweeper::cli::oneLine;
+  CHECK(oneLine("x\ny.off: no such file") == "x\\ny.off: no such file");
+  CHECK(oneLine("a\rb\tc\x1b[31md\x7f") == "a\\rb\\tc\\x1b[31md\\x7f");
+  CHECK(oneLine("caf\xc3\xa9 \\ ok") == "caf\xc3\xa9 \\ ok");  // UTF-8 and backslashes kept
+  CHECK(oneLine("") == "");
+}

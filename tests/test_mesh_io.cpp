@@ -1131,6 +1131,19 @@ TEST_CASE("ASCII PLY: repeated properties refused, long values read whole", "[me
 // Found by an audit: a read error on standard input (a directory, a closed descriptor) was
 // taken for its end (zero points, success), and one in a points file (/proc/self/mem fails its
 // first read) gave the C++ library's message without the file's name.
+// Found by an audit: one line ending in CR alone among LF-ended ones was read with the next as
+// one line by CGAL's OBJ reader, which dropped what followed the CR (a vertex lost, answers
+// silently wrong).
+TEST_CASE("OBJ: a CR inside a line is refused by its line number", "[mesh_io]") {
+  TempDir dir;
+  const std::string path = dir.write("lone_cr.obj", "v 0 0 0\nv 1 0 0\rv 5 5 5\nv 0 1 0\nf 1 2 3\n");
+  CHECK_THROWS_WITH(meshsweeper::readMesh(path), Contains("lone_cr.obj") && Contains("line 2: a CR inside the line"));
+  // CRLF ends, and a CR before trailing blanks, are line ends as before.
+  const Mesh crlf = meshsweeper::readMesh(dir.write("crlf.obj", "v 0 0 0\r\nv 1 0 0 \r \nv 0 1 0\r\nf 1 2 3\r\n"));
+  CHECK(crlf.positions.size() == 3);
+  CHECK(crlf.triangles.size() == 1);
+}
+
 TEST_CASE("readPoints: read errors name the input", "[mesh_io]") {
   if (std::filesystem::exists("/proc/self/mem"))
     CHECK_THROWS_WITH(meshsweeper::readPoints("/proc/self/mem"),

@@ -72,7 +72,7 @@ int runCheck(int argc, char** argv, int first) {
   // Nothing compared is no agreement (found by review: it printed a perfect score).
   if (r.compared == 0) {
     std::fprintf(stderr, "meshsweep: check: %s: no point fell inside OpenVDB's narrow band: nothing was compared\n",
-                 mesh.name.c_str());
+                 oneLine(mesh.name).c_str());
     return kExitInput;
   }
   return kExitOk;

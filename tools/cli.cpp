@@ -271,4 +271,26 @@ std::string jsonString(const std::string& text) {
   return out + "\"";
 }
 
+std::string oneLine(const std::string& text) {
+  std::string out;
+  out.reserve(text.size());
+  for (unsigned char c : text) {
+    if (c >= 0x20 && c != 0x7f) {
+      out += static_cast<char>(c);
+      continue;
+    }
+    switch (c) {
+      case '\n': out += "\\n"; break;
+      case '\r': out += "\\r"; break;
+      case '\t': out += "\\t"; break;
+      default: {
+        char escaped[8];
+        std::snprintf(escaped, sizeof escaped, "\\x%02x", c);
+        out += escaped;
+      }
+    }
+  }
+  return out;
+}
+
 }  // namespace meshsweeper::cli

@@ -127,4 +127,8 @@ class Timer {
 // `text` as a JSON string literal, quotes included.
 std::string jsonString(const std::string& text);
 
+// An error message on one line: its control characters (a line break in a file's name, say)
+// written as C escapes ("\n", "\r", "\t", "\x1b"), a backslash as it is.
+std::string oneLine(const std::string& text);
+
 }  // namespace meshsweeper::cli

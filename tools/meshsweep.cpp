@@ -106,19 +106,19 @@ int main(int argc, char** argv) {
     if (std::fflush(stdout) != 0 || std::ferror(stdout)) throw IoError("standard output: write failed");
     return status;
   } catch (const UsageError& e) {
-    std::fprintf(stderr, "meshsweep: %s\n", e.what());
+    std::fprintf(stderr, "meshsweep: %s\n", oneLine(e.what()).c_str());
     return kExitUsage;
   } catch (const meshsweeper::MeshError& e) {
-    std::fprintf(stderr, "meshsweep: %s\n", e.what());
+    std::fprintf(stderr, "meshsweep: %s\n", oneLine(e.what()).c_str());
     return kExitInput;
   } catch (const IoError& e) {
-    std::fprintf(stderr, "meshsweep: %s\n", e.what());
+    std::fprintf(stderr, "meshsweep: %s\n", oneLine(e.what()).c_str());
     return kExitInput;
   } catch (const std::bad_alloc&) {
     std::fprintf(stderr, "meshsweep: out of memory\n");
     return kExitInput;
   } catch (const std::exception& e) {
-    std::fprintf(stderr, "meshsweep: %s\n", e.what());
+    std::fprintf(stderr, "meshsweep: %s\n", oneLine(e.what()).c_str());
     return kExitInput;
   }
 }
