@@ -80,7 +80,8 @@ double parseFiniteDouble(const std::string& text, const std::string& what);
 // close() flushes and throws IoError if anything failed.
 //
 // A regular file (new, or existing with one name) is written to a temporary file beside it
-// ("NAME.partial-XXXXXX", created at once, so a bad path fails before any work) that close()
+// ("NAME.partial-XXXXXX", created at once: the commands construct it once their inputs are
+// read, an output written in place could be one of them, and before the long work) that close()
 // renames over it: a run that fails, throws or is interrupted (SIGINT, SIGTERM, SIGHUP) leaves
 // the file as it was and removes the temporary one. An existing file keeps its permissions; a
 // symbolic link is written through (its target is replaced, the link stays). Anything else (a
