@@ -25,7 +25,10 @@ void RigidBody::setPose(const Eigen::Isometry3d& pose) {
   if (!gram.isIdentity(1e-9))
     throw std::invalid_argument(
         "RigidBody: the pose's rotation is not orthonormal to 1e-9 (a rigid pose has no scale or shear)");
-  if (std::abs(r.determinant() - 1) > 1e-9)
+  // Orthonormal to 1e-9, its determinant is within 2e-9 of 1 or of -1: the sign tells (a test
+  // of det - 1 to 1e-9 refused a rotation scaled by 1 + 4e-10, which the test above accepts, as
+  // a reflection; found by an audit).
+  if (r.determinant() < 0)
     throw std::invalid_argument(
         "RigidBody: the pose's rotation is a reflection (determinant -1): a rigid pose turns, it does not mirror "
         "(mirror the mesh itself instead)");

@@ -757,15 +757,19 @@ TEST_CASE("rigid bodies: non-rigid poses throw", "[deform][rigid]") {
   // Off orthonormal by less than 1e-9 (a scale of 1 + 3e-10, a shear of 1e-11, a rotation
   // composed of 20,000 steps R = R dR): accepted at the rotation re-orthonormalised, which
   // pose() returns, and the answers are exact for it (brute force over pose() * vertices).
-  Eigen::Isometry3d slightly_scaled = good, slightly_sheared = good, composed = good;
+  // Also scales of 1 +- 4.9e-10, whose determinants are 1 +- 1.5e-9: they were refused as
+  // reflections (found by an audit).
+  Eigen::Isometry3d slightly_scaled = good, slightly_sheared = good, composed = good, grown = good, shrunk = good;
   slightly_scaled.linear() *= 1 + 3e-10;
+  grown.linear() *= 1 + 4.9e-10;
+  shrunk.linear() *= 1 - 4.9e-10;
   slightly_sheared.linear()(0, 1) += 1e-11;
   const Eigen::Matrix3d step = Eigen::AngleAxisd(0.002, Vec3(0, 0.6, 0.8)).toRotationMatrix();
   for (int i = 0; i < 20000; ++i) composed.linear() = composed.linear() * step;
   const Eigen::Matrix3d drifted = composed.linear().transpose() * composed.linear() - Eigen::Matrix3d::Identity();
   CHECK(drifted.cwiseAbs().maxCoeff() > 1e-14);  // beyond rounding: re-orthonormalised
   const Mesh sphere = h->mesh();
-  for (const Eigen::Isometry3d& pose : {slightly_scaled, slightly_sheared, composed}) {
+  for (const Eigen::Isometry3d& pose : {slightly_scaled, slightly_sheared, composed, grown, shrunk}) {
     const RigidBody placed(h, pose);
     const Eigen::Matrix3d r = placed.pose().linear();
     CHECK((r.transpose() * r - Eigen::Matrix3d::Identity()).cwiseAbs().maxCoeff() <= 1e-14);
