@@ -629,10 +629,10 @@ void triangulatePolygon(const std::vector<Vec3>& x, std::vector<VertexIndex>& ri
     for (std::size_t i = 1; i + 1 < ring.size(); ++i) sum += (x[ring[i]] - o).cross(x[ring[i + 1]] - o);
     return sum.dot(normal);
   };
-  // Every test below is charged to the file's budget (`work` corner tests; false: it ran out):
-  // a self-crossing ring (a figure eight, whose lobes turn opposite ways) encloses nothing
-  // long before it is cut down, and each ear's area and spike checks then cost a pass over
-  // the ring (found by an audit: one 8000-corner figure eight took 30 s to read).
+  // Charges `work` corner tests to the file's budget; false when it ran out. Every test below
+  // is charged: a self-crossing ring (a figure eight, whose lobes turn opposite ways) encloses
+  // nothing long before it is cut down, and each ear's area and spike checks then cost a pass
+  // over the ring (found by an audit: one 8000-corner figure eight took 30 s to read).
   auto charge = [&](std::uint64_t work) {
     if (work >= ear_work_left) {
       ear_work_left = 0;
@@ -1426,8 +1426,9 @@ Mesh readMeshFrom(const std::string& path);
 
 }  // namespace
 
-// A read error inside the readers' own loops (a device failing, /proc/self/mem) names the file
-// like every other error (found by an audit: the library's own message escaped).
+// A read error inside the readers' own loops (a device failing) names the file like every
+// other error, as in readPoints (where an audit found the C++ library's own message escaping,
+// on /proc/self/mem).
 Mesh readMesh(const std::string& path) {
   errno = 0;
   try {
