@@ -1260,6 +1260,13 @@ void QueryStream::frontRefine(const Vec3& p, const ScaledPoint& sp, double& uppe
   double lower = 0;
   front_tie_ = true;  // unless a face at the top proves otherwise
   double kth_key = 0;  // k closest: the key of the last face taken
+  // Keys carry the drift's rounding (relative 1e-12 of the keys and the drift) and the bounds'
+  // own, at the coordinates' size (kSlotRounding of the point's, and of the distance, whose
+  // faces the near bounds come from): an entry within both of a face's key may hold a face as
+  // close (found by the degenerate-faces test in the sanitizer build, whose rounding differs:
+  // at coordinates of 1e4 a face at distance 0 was missed behind one 9e-13 away).
+  const double rounding = kSlotRounding * p.cwiseAbs().maxCoeff();
+  auto near = [&](double key) { return key + 1e-12 * (std::abs(key) + std::abs(drift_)) + rounding + kSlotRounding * std::abs(key - drift_); };
   while (!front_.empty()) {
     lower = std::min(front_.front().key - drift_, upper);
     if (stop_at_tolerance && upper < kInf && upper - lower <= tolerance) break;
@@ -1267,7 +1274,7 @@ void QueryStream::frontRefine(const Vec3& p, const ScaledPoint& sp, double& uppe
     // faces, whatever is within that rounding of the k-th key is taken too (the caller keeps
     // the k closest by exact distance).
     if (!stop_at_tolerance && out->size() >= k &&
-        front_.front().key > kth_key + 1e-12 * (std::abs(kth_key) + std::abs(drift_)))
+        front_.front().key > near(kth_key))
       break;
     DriftEntry e = frontPop();
     if (e.drift_at < drift_) {  // stale: recompute at p and put back
@@ -1287,7 +1294,7 @@ void QueryStream::frontRefine(const Vec3& p, const ScaledPoint& sp, double& uppe
         // the drift's rounding: a relative margin covers it).
         upper = e.key - drift_;
         lower = kInf;
-        front_tie_ = !front_.empty() && front_.front().key <= e.key + 1e-12 * (std::abs(e.key) + std::abs(drift_));
+        front_tie_ = !front_.empty() && front_.front().key <= near(e.key);
         upper_face = static_cast<TriangleIndex>(e.ref);
         upper_vertex = kInvalidIndex;
         frontPush(e);
