@@ -1411,34 +1411,12 @@ TextRepair textRepair(const std::string& path, std::istream& in, Format format, 
   return repair;
 }
 
-}  // namespace
-
-namespace {
-
 // The reason of a read error that a stream buffer threw (std::ios_base::failure: a filebuf read
 // through sbumpc, not an istream function, throws instead of setting badbit): errno's text.
 std::string readError() {
   const int code = errno;
   return std::string("read error (") + (code != 0 ? std::strerror(code) : "I/O error") + ")";
 }
-
-Mesh readMeshFrom(const std::string& path);
-
-}  // namespace
-
-// A read error inside the readers' own loops (a device failing) names the file like every
-// other error, as in readPoints (where an audit found the C++ library's own message escaping,
-// on /proc/self/mem).
-Mesh readMesh(const std::string& path) {
-  errno = 0;
-  try {
-    return readMeshFrom(path);
-  } catch (const std::ios_base::failure&) {
-    fail(path, readError());
-  }
-}
-
-namespace {
 
 Mesh readMeshFrom(const std::string& path) {
   std::ifstream file;
@@ -1625,6 +1603,18 @@ Mesh readMeshFrom(const std::string& path) {
 }
 
 }  // namespace
+
+// A read error inside the readers' own loops (a device failing) names the file like every
+// other error, as in readPoints (where an audit found the C++ library's own message escaping,
+// on /proc/self/mem).
+Mesh readMesh(const std::string& path) {
+  errno = 0;
+  try {
+    return readMeshFrom(path);
+  } catch (const std::ios_base::failure&) {
+    fail(path, readError());
+  }
+}
 
 void writeOff(const Mesh& mesh, const std::string& path) {
   std::ofstream out(path, std::ios::out | std::ios::trunc);

@@ -56,6 +56,22 @@ Vec3 randomUnit(Random& random) {
   }
 }
 
+// Two lists of hits (TriangleHit or BruteHit): the same triangles at the same distances, in
+// order; and the pairs side by side for a message, " [triangle distance | triangle distance]".
+template <class A, class B>
+bool sameHits(const std::vector<A>& a, const std::vector<B>& b) {
+  bool same = a.size() == b.size();
+  for (size_t j = 0; same && j < a.size(); ++j) same = a[j].triangle == b[j].triangle && a[j].distance == b[j].distance;
+  return same;
+}
+template <class A, class B>
+std::string hitPairs(const std::vector<A>& a, const std::vector<B>& b) {
+  std::ostringstream list;
+  for (size_t j = 0; j < std::min(a.size(), b.size()); ++j)
+    list << " [" << a[j].triangle << " " << num(a[j].distance) << " | " << b[j].triangle << " " << num(b[j].distance) << "]";
+  return list.str();
+}
+
 // ---- Paths ----------------------------------------------------------------------------------
 
 struct PathSpec {
@@ -939,14 +955,8 @@ TEST_CASE("coherent queries: kClosestCoherent keeps the same k faces as kClosest
       if (p.norm() > 3) v = -0.01 * p.normalized();
       coherent.kClosestCoherent(p, k, a);
       fresh.kClosest(p, k, b);
-      bool same = a.size() == b.size();
-      for (size_t j = 0; same && j < a.size(); ++j) same = a[j].triangle == b[j].triangle && a[j].distance == b[j].distance;
-      if (!same && ++differ <= 3) {
-        std::ostringstream list;
-        for (size_t j = 0; j < std::min(a.size(), b.size()); ++j)
-          list << " [" << a[j].triangle << " " << num(a[j].distance) << " | " << b[j].triangle << " " << num(b[j].distance) << "]";
-        FAIL_CHECK("step " << i << " " << text(p) << ": kClosestCoherent | kClosest" << list.str());
-      }
+      if (!sameHits(a, b) && ++differ <= 3)
+        FAIL_CHECK("step " << i << " " << text(p) << ": kClosestCoherent | kClosest" << hitPairs(a, b));
     }
     CHECK(differ == 0);
   }
@@ -1033,14 +1043,8 @@ TEST_CASE("coherent queries: priority queries on meshes of degenerate and duplic
       const std::vector<BruteHit> truth = bruteForceKClosest(mesh, p, 3);
       std::vector<TriangleHit> hits;
       k_stream.kClosestCoherent(p, 3, hits);
-      bool same = hits.size() == truth.size();
-      for (size_t j = 0; same && j < hits.size(); ++j) same = hits[j].triangle == truth[j].triangle && hits[j].distance == truth[j].distance;
-      if (!same && ++k_wrong <= 3) {
-        std::ostringstream list;
-        for (size_t j = 0; j < std::min(hits.size(), truth.size()); ++j)
-          list << " [" << hits[j].triangle << " " << num(hits[j].distance) << " | " << truth[j].triangle << " " << num(truth[j].distance) << "]";
-        FAIL_CHECK(mesh.name << " " << text(p) << ": kClosestCoherent(p, 3) | brute force" << list.str());
-      }
+      if (!sameHits(hits, truth) && ++k_wrong <= 3)
+        FAIL_CHECK(mesh.name << " " << text(p) << ": kClosestCoherent(p, 3) | brute force" << hitPairs(hits, truth));
       const ClosestPoint exact = exact_stream.closestWithinCoherent(p, 0);
       if (!(exact.triangle == truth[0].triangle && exact.distance == truth[0].distance && exact.lower <= exact.distance) &&
           ++exact_wrong <= 3)
