@@ -23,6 +23,7 @@
 // on the stream (scratch only) that computes it, so the thread count never changes a result.
 #include "collision/distance_service.h"
 
+#include "core/threads.h"
 #include "core/triangle_distance.h"
 #include "deform/inflated_bounds.h"
 #include "deform/keyframe_bounds.h"
@@ -1279,8 +1280,7 @@ void DistanceService::setThreads(unsigned threads) {
     throw std::invalid_argument("DistanceService: threads must be at most " + std::to_string(kMaxThreads) +
                                 " (0: TBB's default), got " + std::to_string(threads));
   impl_->threads = threads;
-  impl_->arena = std::make_unique<tbb::task_arena>(threads == 0 ? static_cast<int>(tbb::task_arena::automatic)
-                                                                 : static_cast<int>(threads));
+  impl_->arena = std::make_unique<tbb::task_arena>(arenaConcurrency(threads));
 }
 
 unsigned DistanceService::threads() const { return static_cast<unsigned>(impl_->arena->max_concurrency()); }

@@ -314,6 +314,9 @@ class DistanceService {
 
   // Threads used by step(): 0 = TBB's default; at most 65536 (std::invalid_argument beyond,
   // the service unchanged; ServiceOptions::threads too). Results do not depend on it.
+  // threads() says how many step() uses: the count asked for, at most TBB's limit (the cores,
+  // unless the program set global_control's max_allowed_parallelism; more could not run at
+  // once, and TBB would warn on standard error).
   void setThreads(unsigned threads);
   unsigned threads() const;
 

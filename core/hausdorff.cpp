@@ -89,6 +89,7 @@
 #include "core/morton.h"
 
 #include "core/sweep_query.h"
+#include "core/threads.h"
 
 #include <Eigen/Geometry>
 
@@ -108,12 +109,6 @@
 
 namespace meshsweeper {
 namespace {
-
-// A task arena for `threads` workers (0: TBB's default). TBB fails on more than it can hold
-// (65536 and up crashed): more threads than cores gain nothing, so the count is capped at 4096.
-int arenaThreads(unsigned threads) {
-  return threads == 0 ? static_cast<int>(tbb::task_arena::automatic) : static_cast<int>(std::min(threads, 4096u));
-}
 
 using Clock = std::chrono::steady_clock;
 double secondsSince(Clock::time_point start) {
@@ -1120,7 +1115,8 @@ HausdorffResult run(const Mesh& a, const std::shared_ptr<const Hierarchy>& a_hie
   const double tol = result.tolerance;
   const bool parallel = options.threads != 1;
 
-  tbb::task_arena arena(arenaThreads(options.threads));
+  tbb::task_arena arena(arenaConcurrency(options.threads));
+  result.threads = static_cast<unsigned>(arena.max_concurrency());
   arena.execute([&] {
     Direction ab(a, b_hierarchy, scale, parallel);
     std::unique_ptr<Direction> ba;
@@ -1197,7 +1193,7 @@ HausdorffResult hausdorff(const Mesh& a, const Mesh& b, const HausdorffOptions& 
   checkOrThrow(b);
   effectiveTolerance(options, a);  // fail before building
   std::shared_ptr<const Hierarchy> ha, hb;
-  tbb::task_arena arena(arenaThreads(options.threads));
+  tbb::task_arena arena(arenaConcurrency(options.threads));
   arena.execute([&] {
     tbb::parallel_invoke([&] { ha = Hierarchy::build(a); }, [&] { hb = Hierarchy::build(b); });
   });

@@ -59,8 +59,9 @@ struct HausdorffOptions {
   double tolerance = 0;
   // Otherwise the tolerance is relative_tolerance times the bounding-box diagonal of A.
   double relative_tolerance = 1e-4;
-  // Worker threads: 0 = all (TBB's default); at most 4096 are used. The result does not
-  // depend on this number.
+  // Worker threads: 0 = all (TBB's default); at most TBB's limit (the cores, unless the
+  // program set global_control's max_allowed_parallelism). The result does not depend on this
+  // number.
   unsigned threads = 0;
   // Symmetric only: refine both directions until each one-sided interval meets the tolerance
   // (by default the dominated direction stops as soon as it provably cannot change H).
@@ -114,6 +115,7 @@ struct HausdorffResult {
   bool converged = true;        // upper - lower <= tolerance (false only if refinement hit its
                                 // depth limit: sub-triangles below rounding size)
   HausdorffCounters counters;   // both directions summed
+  unsigned threads = 0;         // the worker threads it could use (HausdorffOptions::threads)
   double build_seconds = 0;     // hierarchies (0 when the caller passed them)
   double seconds = 0;           // everything, builds included
 };

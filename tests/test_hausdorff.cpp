@@ -30,6 +30,8 @@
 
 #include <catch2/catch.hpp>
 
+#include <tbb/global_control.h>
+
 #include <algorithm>
 #include <cmath>
 #include <filesystem>
@@ -534,9 +536,15 @@ TEST_CASE("1 and 2 threads give identical results") {
   requireIdentical(one.b_to_a, two.b_to_a);
   CHECK(one.lower == two.lower);
   CHECK(one.upper == two.upper);
-  // Absurd thread counts are capped (TBB crashed from 65536 threads on).
-  for (unsigned threads : {70000u, 4000000000u}) {
+  CHECK(one.threads == 1);
+  // Counts past TBB's limit (the cores; TBB warned on standard error, and crashed from 65536
+  // threads on) are capped at it.
+  const auto limit = static_cast<unsigned>(
+      tbb::global_control::active_value(tbb::global_control::max_allowed_parallelism));
+  CHECK(two.threads == std::min(2u, limit));
+  for (unsigned threads : {limit + 1, 70000u, 4000000000u}) {
     const HausdorffResult many = hausdorff(a, b, absolute(1e-4, threads));
+    CHECK(many.threads == limit);
     CHECK(many.lower == one.lower);
     CHECK(many.upper == one.upper);
   }
