@@ -151,11 +151,26 @@ bool isHugeInteger(std::string_view word) {
   return !word.empty() && std::all_of(word.begin(), word.end(), [](char c) { return c >= '0' && c <= '9'; });
 }
 
+// A word of the file, quoted for a message: its first 40 bytes, a byte that is not printable
+// ASCII written as its C escape ("\x1b", "\t"), so that the message stays one line and says
+// what the file holds.
 std::string shown(std::string_view word) {
   constexpr std::size_t kShown = 40;
-  std::string s(word.substr(0, kShown));
-  for (char& c : s)
-    if (!std::isprint(static_cast<unsigned char>(c))) c = '?';
+  std::string s;
+  for (const char c : word.substr(0, kShown)) {
+    const auto byte = static_cast<unsigned char>(c);
+    if (byte >= 0x20 && byte < 0x7f) {
+      s += c;
+    } else if (byte == '\t') {
+      s += "\\t";
+    } else if (byte == '\r') {
+      s += "\\r";
+    } else {
+      char escaped[8];
+      std::snprintf(escaped, sizeof escaped, "\\x%02x", byte);
+      s += escaped;
+    }
+  }
   return "'" + s + (word.size() > kShown ? "...'" : "'");
 }
 

@@ -36,7 +36,13 @@ int openOutput(const std::string& path, OpenOutput& out) {
     // A rename would replace a file its owner made read-only.
     if (exists && ::access(target.c_str(), W_OK) != 0) return errno;
     std::string name = target + ".partial-XXXXXX";
-    const int fd = ::mkstemp(name.data());
+    int fd = ::mkstemp(name.data());
+    if (fd < 0 && errno == ENAMETOOLONG) {
+      // A name at the length limit: a short temporary in the same directory, so that the
+      // rename stays within it.
+      name = (std::filesystem::path(target).parent_path() / ".meshsweep-partial-XXXXXX").string();
+      fd = ::mkstemp(name.data());
+    }
     if (fd >= 0) {
       out.file = ::fdopen(fd, "wb");
       if (!out.file) {
@@ -56,13 +62,21 @@ int openOutput(const std::string& path, OpenOutput& out) {
       }
       return 0;
     }
-    // No temporary beside it (a name at the length limit, or a writable file in a directory
-    // that is not): the file itself.
+    // No temporary beside it (a writable file in a directory that is not): the file itself.
     const int error = errno;
     if (!(error == ENAMETOOLONG || (exists && (error == EACCES || error == EPERM || error == EROFS)))) return error;
   }
-  out.file = std::fopen(path.c_str(), "wb");
-  return out.file ? 0 : errno;
+  // In place, not truncated yet: a run that fails before it writes leaves the file as it was;
+  // finishOutput() cuts a regular file to what was written.
+  const int fd = ::open(path.c_str(), O_WRONLY | O_CREAT | O_CLOEXEC, 0666);
+  if (fd < 0) return errno;
+  out.file = ::fdopen(fd, "wb");
+  if (!out.file) {
+    const int error = errno;
+    ::close(fd);
+    return error;
+  }
+  return 0;
 }
 
 int finishOutput(OpenOutput& out, bool write_failed, bool* at_rename) {
@@ -70,6 +84,11 @@ int finishOutput(OpenOutput& out, bool write_failed, bool* at_rename) {
   int error = write_failed ? EIO : 0;
   if (std::fflush(out.file) != 0 && !error) error = errno ? errno : EIO;
   if (!out.temporary.empty()) (void)::fchmod(::fileno(out.file), static_cast<mode_t>(out.mode));
+  struct stat st {};
+  if (!error && out.temporary.empty() && ::fstat(::fileno(out.file), &st) == 0 && S_ISREG(st.st_mode)) {
+    const off_t written = ::ftello(out.file);
+    if (written < 0 || ::ftruncate(::fileno(out.file), written) != 0) error = errno ? errno : EIO;
+  }
   if (std::fclose(out.file) != 0 && !error) error = errno ? errno : EIO;
   out.file = nullptr;
   if (!error && !out.temporary.empty() && std::rename(out.temporary.c_str(), out.target.c_str()) != 0) {

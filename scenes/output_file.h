@@ -17,7 +17,10 @@ std::filesystem::path outputDestination(const std::string& name);
 // renames over it with the permissions of the file it replaces (a new one's: 0666 less the
 // umask); a symbolic link is written through. Anything else (a device, a pipe, a file with
 // several names, a link that leads nowhere) is written in place, and so is a writable file in
-// a directory that has no room for a temporary one.
+// a directory where no temporary can be created; a name too long for the suffix gets a short
+// temporary in the same directory (".meshsweep-partial-XXXXXX"). A file written in place is
+// not truncated when opened, only cut to what was written when finished, so a run that fails
+// before writing leaves it as it was.
 struct OpenOutput {
   std::FILE* file = nullptr;
   std::string temporary;  // the file written ("": in place)

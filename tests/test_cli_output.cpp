@@ -8,6 +8,7 @@
 
 #include <catch2/catch.hpp>
 
+#include <sys/resource.h>
 #include <sys/stat.h>
 #include <sys/wait.h>
 #include <unistd.h>
@@ -113,13 +114,19 @@ TEST_CASE("output: a run that throws before close() leaves the file as it was", 
 TEST_CASE("output: an interrupted run leaves the file as it was and no temporary file", "[cli][output]") {
   Scratch s("signal");
   const std::string file = s.path("result.json");
-  for (const int sig : {SIGINT, SIGTERM, SIGHUP}) {
+  // Every signal that ends a process by default, save a fault's (found by an audit: SIGQUIT,
+  // SIGALRM, SIGUSR1 and a full file's SIGXFSZ left the temporary behind).
+  for (const int sig : {SIGINT, SIGTERM, SIGHUP, SIGQUIT, SIGPIPE, SIGALRM, SIGUSR1, SIGUSR2, SIGXCPU,
+                        SIGXFSZ, SIGVTALRM, SIGPROF}) {
     writeFile(file, "keep\n");
     const pid_t child = ::fork();
     REQUIRE(child >= 0);
     if (child == 0) {
-      // Default actions, as a shell gives a command it runs in the foreground.
+      // Default actions, as a shell gives a command it runs in the foreground; no core file
+      // for the signals that would dump one.
       std::signal(sig, SIG_DFL);
+      const struct rlimit no_core {0, 0};
+      ::setrlimit(RLIMIT_CORE, &no_core);
       Output out(file);
       out.write("half a result");
       ::raise(sig);
@@ -169,6 +176,20 @@ TEST_CASE("output: devices and files with several names are written in place", "
     out.close();
   }
   CHECK(readFile(s.path("b.txt")) == "both names");
+  // In place, the file is not truncated when opened, only cut to what was written when closed
+  // (found by an audit: a run that failed before writing emptied it).
+  try {
+    Output out(file);
+    throw std::runtime_error("the computation failed");
+  } catch (const std::runtime_error&) {
+  }
+  CHECK(readFile(file) == "both names");
+  {
+    Output out(file);
+    out.write("one");
+    out.close();
+  }
+  CHECK(readFile(s.path("b.txt")) == "one");
   {
     Output out("/dev/null");
     out.write("nothing");
@@ -191,13 +212,43 @@ TEST_CASE("output: a missing directory or a directory as the file is refused at 
   CHECK(s.names() == std::vector<std::string>{"loop_a", "loop_b", "taken"});
 }
 
+// Found by an audit: a name with no room left for ".partial-XXXXXX" (255 bytes at most) was
+// written in place, so a failed run emptied it.
+TEST_CASE("output: a name at the length limit still gets a temporary file", "[cli][output]") {
+  Scratch s("long");
+  const std::string name = std::string(250, 'n') + ".csv";
+  const std::string file = s.path(name);
+  writeFile(file, "keep\n");
+  try {
+    Output out(file);
+    out.write("half a result");
+    const std::vector<std::string> names = s.names();
+    REQUIRE(names.size() == 2);  // the file and its temporary, a short name in the same directory
+    CHECK(names[0].rfind(".meshsweep-partial-", 0) == 0);
+    throw std::runtime_error("the computation failed");
+  } catch (const std::runtime_error&) {
+  }
+  CHECK(readFile(file) == "keep\n");
+  CHECK(s.names() == std::vector<std::string>{name});
+  {
+    Output out(file);
+    out.write("whole");
+    out.close();
+  }
+  CHECK(readFile(file) == "whole");
+  CHECK(s.names() == std::vector<std::string>{name});
+}
+
 #if defined(__linux__)
-TEST_CASE("output: a write that fails is reported by close()", "[cli][output]") {
+TEST_CASE("output: a write that fails is reported by flush() and close()", "[cli][output]") {
   // /dev/full refuses every write: written in place (a device), the error is reported by close().
   if (!fs::exists("/dev/full")) return;
   Output out("/dev/full");
   out.write("anything");
   CHECK_THROWS_AS(out.close(), IoError);
+  Output flushed("/dev/full");
+  flushed.write("anything");
+  CHECK_THROWS_WITH(flushed.flush(), "/dev/full: write failed");
 }
 #endif
 
@@ -277,4 +328,31 @@ TEST_CASE("error messages are one line: control characters escaped", "[cli]") {
   CHECK(oneLine("a\rb\tc\x1b[31md\x7f") == "a\\rb\\tc\\x1b[31md\\x7f");
   CHECK(oneLine("caf\xc3\xa9 \\ ok") == "caf\xc3\xa9 \\ ok");  // UTF-8 and backslashes kept
   CHECK(oneLine("") == "");
+}
+
+// Found by an audit: "--out -h" printed the help instead of writing a file named "-h", and an
+// empty output name or argument meant standard output or "': no such file".
+TEST_CASE("arguments: help where an option stands, empty values and arguments refused", "[cli]") {
+  using meshsweeper::cli::Args;
+  using meshsweeper::cli::HelpRequested;
+  using meshsweeper::cli::UsageError;
+  const std::vector<meshsweeper::cli::OptionSpec> specs = {{"--out", true}, {"--path", false}};
+  auto parse = [&](std::vector<std::string> words) {
+    std::vector<char*> argv;
+    for (std::string& word : words) argv.push_back(word.data());
+    const Args args("closest", static_cast<int>(argv.size()), argv.data(), 0, specs);
+    args.expectPositional({"MESH", "POINTS"});
+    return args.has("--out") ? args.value("--out") : std::string("(none)");
+  };
+  CHECK(parse({"m.off", "p.txt", "--out", "-h"}) == "-h");
+  CHECK(parse({"m.off", "p.txt", "--out", "--help"}) == "--help");
+  CHECK_THROWS_AS(parse({"m.off", "p.txt", "--path", "-h"}), HelpRequested);
+  CHECK_THROWS_AS(parse({"--help", "--bogus"}), HelpRequested);  // help wins over mistakes
+  CHECK_THROWS_AS(parse({"m.off", "--out", "x", "--help"}), HelpRequested);
+  CHECK(parse({"m.off", "--", "--help"}) == "(none)");  // POINTS is a file named --help
+  CHECK_THROWS_WITH(parse({"m.off", "p.txt", "--out", ""}), "closest: option --out needs a value, got an empty one");
+  CHECK_THROWS_WITH(parse({"m.off", "p.txt", "--out="}), "closest: option --out needs a value, got an empty one");
+  CHECK_THROWS_WITH(parse({"", "p.txt"}), "closest: argument MESH is empty");
+  CHECK_THROWS_WITH(parse({"m.off", ""}), "closest: argument POINTS is empty");
+  CHECK_THROWS_AS(parse({"m.off", ""}), UsageError);
 }

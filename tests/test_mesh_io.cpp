@@ -1198,6 +1198,11 @@ TEST_CASE("readPoints refuses malformed lines with 'PATH:LINE: problem'", "[mesh
   CHECK_THAT(pointsError(four), StartsWith(four + ":1: ") && Contains("found 4 fields"));
   const std::string word = dir.write("word.txt", "1 2 3\n1 two 3\n");
   CHECK_THAT(pointsError(word), StartsWith(word + ":2: ") && Contains("'two' is not a number"));
+  // Bytes that are not printable are shown as C escapes, not '?' (found by an audit).
+  const std::string escape = dir.write("escape.txt", "1 2 3\n1 \x1b[31m3 3\n");
+  CHECK_THAT(pointsError(escape), StartsWith(escape + ":2: ") && Contains("'\\x1b[31m3' is not a number"));
+  const std::string control = dir.write("control.txt", "1 2 3\x1a\n");
+  CHECK_THAT(pointsError(control), Contains("'3\\x1a' is not a number"));
   const std::string comma = dir.write("comma.txt", "1,2,3\n");
   CHECK_THAT(pointsError(comma), StartsWith(comma + ":1: "));
   for (const char* bad : {"nan", "inf", "-inf", "1e999"}) {

@@ -47,7 +47,7 @@ int runCheck(int argc, char** argv, int first) {
 
   const Mesh mesh = readMesh(args.positional()[0]);
   const VdbCheckReport r = vdbCheck(mesh, options);
-  std::printf("mesh: %s\n", mesh.name.c_str());
+  std::printf("mesh: %s\n", oneLine(mesh.name).c_str());  // one key: value per line
   std::printf("triangles: %zu\n", r.triangles);
   std::printf("closed: %s\n", r.closed ? "yes" : "no");
   std::printf("grid: %s, voxel %.6g, band %.3g voxels, built in %.3f s\n",

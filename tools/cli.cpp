@@ -25,7 +25,11 @@ constexpr int kMaxTemporaries = 8;
 constexpr size_t kMaxTemporaryPath = 4096;
 char g_temporaries[kMaxTemporaries][kMaxTemporaryPath];
 volatile sig_atomic_t g_temporary_used[kMaxTemporaries];
-constexpr int kCleanupSignals[] = {SIGINT, SIGTERM, SIGHUP};
+// Every signal whose default action ends the process and that a program may catch, save the
+// ones a fault raises (SIGSEGV, SIGBUS, SIGFPE, SIGILL, SIGABRT, SIGTRAP, SIGSYS): an
+// interrupt, a timer, a full file (SIGXFSZ), a closed pipe, a user's signal.
+constexpr int kCleanupSignals[] = {SIGINT,  SIGTERM, SIGHUP,    SIGQUIT, SIGPIPE, SIGALRM, SIGUSR1,
+                                   SIGUSR2, SIGXCPU, SIGXFSZ, SIGVTALRM, SIGPROF, SIGIO};
 
 extern "C" void removeTemporariesAndResignal(int signal) {
   for (int i = 0; i < kMaxTemporaries; ++i)
@@ -79,6 +83,14 @@ const OptionSpec* findSpec(const std::vector<OptionSpec>& specs, const std::stri
 Args::Args(const char* command, int argc, char** argv, int first,
            const std::vector<OptionSpec>& specs)
     : command_(command) {
+  // Help first, wherever it stands: it wins over any mistake on the same line.
+  for (int i = first; i < argc; ++i) {
+    const std::string arg = argv[i];
+    if (arg == "--") break;
+    if (arg == "--help" || arg == "-h") throw HelpRequested();
+    const OptionSpec* spec = findSpec(specs, arg);
+    if (spec && spec->takes_value) ++i;  // its value, whatever it reads
+  }
   bool options_done = false;
   for (int i = first; i < argc; ++i) {
     const std::string arg = argv[i];
@@ -113,6 +125,7 @@ Args::Args(const char* command, int argc, char** argv, int first,
         if (i + 1 >= argc) throw UsageError(command_ + ": option " + name + " needs a value");
         value = argv[++i];
       }
+      if (value.empty()) throw UsageError(command_ + ": option " + name + " needs a value, got an empty one");
     } else if (inline_value) {
       throw UsageError(command_ + ": option " + name + " takes no value");
     }
@@ -125,6 +138,8 @@ void Args::expectPositional(const std::vector<const char*>& names) const {
     throw UsageError(command_ + ": missing argument " + names[positional_.size()]);
   if (positional_.size() > names.size())
     throw UsageError(command_ + ": unexpected argument '" + positional_[names.size()] + "'");
+  for (size_t i = 0; i < names.size(); ++i)
+    if (positional_[i].empty()) throw UsageError(command_ + ": argument " + names[i] + " is empty");
 }
 
 bool Args::has(const char* name) const {
@@ -183,7 +198,7 @@ double parseFiniteDouble(const std::string& text, const std::string& what) {
   return x;
 }
 
-Output::Output(const std::string& path) : path_(path.empty() ? "-" : path) {
+Output::Output(const std::string& path) : path_(path) {
   buffer_.reserve(kOutputBufferBytes);
   if (path_ == "-") {
     out_.file = stdout;
@@ -229,6 +244,12 @@ void Output::printf(const char* format, ...) {
     return;
   }
   write(line, static_cast<size_t>(n));
+}
+
+void Output::flush() {
+  flushBuffer();
+  if (std::fflush(out_.file) != 0) failed_ = true;
+  if (failed_) throw IoError((path_ == "-" ? std::string("standard output") : path_) + ": write failed");
 }
 
 void Output::close() {

@@ -33,6 +33,13 @@ class IoError : public std::runtime_error {
   using std::runtime_error::runtime_error;
 };
 
+// "--help" or "-h" where an option may stand (not an option's value, nor after "--"): the
+// command's help is wanted instead of a run. Thrown by Args; main() prints the help, exit 0.
+class HelpRequested : public std::exception {
+ public:
+  const char* what() const noexcept override { return "help requested"; }
+};
+
 // One option a subcommand accepts: "--name VALUE" (or "--name=VALUE") when takes_value,
 // else a flag "--name".
 struct OptionSpec {
@@ -45,13 +52,14 @@ class Args {
  public:
   // Parses argv[first..argc). Options may appear anywhere; "--" ends options; "-" alone is a
   // positional argument (standard input), and so is a negative number ("-5", "-.5"). Throws
-  // UsageError on an unknown option, a repeated option, or an option missing its value.
+  // HelpRequested for "--help" or "-h" in an option's place; UsageError on an unknown option,
+  // a repeated option, or an option missing its value or given an empty one.
   // `command` names the subcommand in messages.
   Args(const char* command, int argc, char** argv, int first, const std::vector<OptionSpec>& specs);
 
   const std::vector<std::string>& positional() const { return positional_; }
-  // Throws UsageError unless there are exactly `names.size()` positional arguments; the message
-  // names the missing one (e.g. "closest: missing argument POINTS").
+  // Throws UsageError unless there are exactly `names.size()` positional arguments, none empty;
+  // the message names the missing one (e.g. "closest: missing argument POINTS").
   void expectPositional(const std::vector<const char*>& names) const;
 
   bool has(const char* name) const;
@@ -76,8 +84,8 @@ uint64_t parseInteger(const std::string& text, const std::string& what, uint64_t
 // Parses a whole string as a finite double; throws UsageError.
 double parseFiniteDouble(const std::string& text, const std::string& what);
 
-// An output destination: a file, or standard output for "" or "-". Writes are buffered;
-// close() flushes and throws IoError if anything failed.
+// An output destination: a file, or standard output for "-". Writes are buffered; close()
+// flushes and throws IoError if anything failed.
 //
 // A regular file (new, or existing with one name) is written to a temporary file beside it
 // ("NAME.partial-XXXXXX", created at once: the commands construct it once their inputs are
@@ -85,7 +93,8 @@ double parseFiniteDouble(const std::string& text, const std::string& what);
 // renames over it: a run that fails, throws or is interrupted (SIGINT, SIGTERM, SIGHUP) leaves
 // the file as it was and removes the temporary one. An existing file keeps its permissions; a
 // symbolic link is written through (its target is replaced, the link stays). Anything else (a
-// device, a pipe, /dev/stdout, a file with several hard links) is written in place.
+// device, a pipe, /dev/stdout, a file with several hard links) is written in place, not
+// truncated before the first write (scenes/output_file.h).
 class Output {
  public:
   explicit Output(const std::string& path);
@@ -97,6 +106,10 @@ class Output {
   void write(const std::string& text) { write(text.data(), text.size()); }
   // printf-style formatted line or fragment (at most 1024 characters per call).
   void printf(const char* format, ...) __attribute__((format(printf, 2, 3)));
+  // Writes out what is buffered; throws IoError ("PATH: write failed") if any write failed,
+  // the destination then unchanged. Lets a command check all its outputs before it puts any
+  // in place.
+  void flush();
   // Flushes and puts the file in place; throws IoError ("PATH: write failed") if any write
   // failed, the destination then unchanged.
   void close();

@@ -62,9 +62,20 @@ double percent(double value, double diagonal) { return diagonal > 0 ? 100 * valu
 
 // A bound as a percentage of the diagonal, rounded outward: 5 decimals, 7 significant digits
 // in exponent form once that would print more than a dozen digits; "n/a" for a zero diagonal.
+// A percentage past the largest double (a tiny A far from B, an absurd tolerance), in long
+// double with 7 significant digits; a bound is first moved outward by a millionth, more than
+// the rounding of both the division and the printing.
+std::string hugePercent(double value, double diagonal, int outward) {
+  const long double p = 100.0L * value / diagonal * (1 + outward * 1e-6L);
+  char text[64];
+  std::snprintf(text, sizeof text, "%.7Lg", p);
+  return text;
+}
+
 std::string percentBound(double value, double diagonal, bool up) {
   if (!(diagonal > 0)) return "n/a";
   const double p = percent(value, diagonal);
+  if (!std::isfinite(p) && std::isfinite(value)) return hugePercent(value, diagonal, up ? 1 : -1);
   return std::fabs(p) < 1e6 ? outwardFixed(p, 5, up) : outwardBound(p, 7, up);
 }
 
@@ -72,6 +83,7 @@ std::string percentBound(double value, double diagonal, bool up) {
 std::string percentEstimate(double value, double diagonal) {
   if (!(diagonal > 0)) return "n/a";
   const double p = percent(value, diagonal);
+  if (!std::isfinite(p) && std::isfinite(value)) return hugePercent(value, diagonal, 0);
   char text[64];
   std::snprintf(text, sizeof text, std::fabs(p) < 1e6 ? "%.5f" : "%.7g", p);
   return text;
@@ -157,7 +169,6 @@ void writeColors(Output& out, const Mesh& mesh, const std::vector<double>& dista
     out.printf("%.17g %.17g %.17g %.17g %d %d %d\n", p.x(), p.y(), p.z(), d, rgb[0], rgb[1], rgb[2]);
   }
   for (const Triangle& t : mesh.triangles) out.printf("3 %u %u %u\n", t[0], t[1], t[2]);
-  out.close();
 }
 
 // One direction of the summary.
@@ -222,15 +233,15 @@ int runHausdorff(int argc, char** argv, int first) {
 
   const Mesh a = readMesh(a_path);
   const Mesh b = readMesh(b_path);
+  const double diagonal = meshDiagonal(a);
+  if (!(diagonal > 0) && !(options.tolerance > 0))
+    throw MeshError(a_path + ": all vertices coincide (zero diagonal); give --tolerance");
   // Output files are opened (created) before the computation, so a bad path fails at once.
   std::unique_ptr<Output> json_out, colors_out;
   if (args.has("--json"))
     json_out = std::make_unique<Output>(json_to_stdout ? std::string("-") : args.value("--json"));
   if (args.has("--colors"))
     colors_out = std::make_unique<Output>(colors_to_stdout ? std::string("-") : args.value("--colors"));
-  const double diagonal = meshDiagonal(a);
-  if (!(diagonal > 0) && !(options.tolerance > 0))
-    throw MeshError(a_path + ": all vertices coincide (zero diagonal); give --tolerance");
 
   // Progress on a terminal only: the bounds as they tighten, at most ten times a second.
   double last_print = -1;
@@ -253,9 +264,9 @@ int runHausdorff(int argc, char** argv, int first) {
   std::FILE* s = json_to_stdout || colors_to_stdout ? stderr : stdout;
   std::fprintf(s, "Hausdorff distance between A and B (certified bounds)\n");
   std::fprintf(s, "  A: %s  %zu vertices, %zu triangles, area %.7g, diagonal %.7g\n",
-               a_path.c_str(), a.positions.size(), a.triangles.size(), surfaceArea(a), diagonal);
+               oneLine(a_path).c_str(), a.positions.size(), a.triangles.size(), surfaceArea(a), diagonal);
   std::fprintf(s, "  B: %s  %zu vertices, %zu triangles, area %.7g, diagonal %.7g\n",
-               b_path.c_str(), b.positions.size(), b.triangles.size(), surfaceArea(b),
+               oneLine(b_path).c_str(), b.positions.size(), b.triangles.size(), surfaceArea(b),
                meshDiagonal(b));
   std::fprintf(s, "  tolerance %.7g (%s%% of A's diagonal)\n\n", r.tolerance,
                percentEstimate(r.tolerance, diagonal).c_str());
@@ -277,14 +288,19 @@ int runHausdorff(int argc, char** argv, int first) {
         jsonOneSided(r.b_to_a) + ",\n  \"hausdorff\": {\"lower\": " + jsonNumber(r.lower) +
         ", \"upper\": " + jsonNumber(r.upper) + "},\n  \"tolerance\": " + jsonNumber(r.tolerance) +
         ",\n  \"converged\": " + (r.converged ? "true" : "false") + ",\n  \"threads\": " +
-        std::to_string(options.threads) + ",\n  \"seconds\": " + jsonNumber(r.seconds) +
+        std::to_string(r.threads) + ",\n  \"seconds\": " + jsonNumber(r.seconds) +
         ",\n  \"build_seconds\": " + jsonNumber(r.build_seconds) +
         ",\n  \"samples\": " + std::to_string(r.counters.samples) +
         ",\n  \"queries\": " + std::to_string(r.counters.queries) +
         ",\n  \"triangles_refined\": " + std::to_string(r.counters.triangles_refined) + "\n}\n");
-    out.close();
   }
   if (colors_out) writeColors(*colors_out, a, r.a_to_b.vertex_distance);
+  // Both written whole before either replaces its destination: a failed write leaves both as
+  // they were.
+  for (Output* out : {json_out.get(), colors_out.get()})
+    if (out) out->flush();
+  for (Output* out : {json_out.get(), colors_out.get()})
+    if (out) out->close();
   return kExitOk;
 }
 

@@ -85,14 +85,12 @@ int dispatch(int argc, char** argv) {
   if (!command)
     throw UsageError(std::string("unknown command '") + argv[1] +
                      "' (run 'meshsweep help' for the list)");
-  for (int i = 2; i < argc; ++i) {
-    if (std::strcmp(argv[i], "--") == 0) break;
-    if (isHelpFlag(argv[i])) {
-      std::fputs(command->help, stdout);
-      return kExitOk;
-    }
+  try {
+    return command->run(argc, argv, 2);
+  } catch (const HelpRequested&) {  // "--help" or "-h" where an option may stand (Args)
+    std::fputs(command->help, stdout);
+    return kExitOk;
   }
-  return command->run(argc, argv, 2);
 }
 
 }  // namespace

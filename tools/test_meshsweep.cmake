@@ -40,9 +40,9 @@ set(failed 0)
 set(failures "")
 
 # check(NAME RC <exit status> ARGS <arguments...> [INPUT file] [OUT substrings...]
-#       [ERR substrings...] [NOT_OUT substrings...] [COMMAND program])
+#       [ERR substrings...] [NOT_OUT substrings...] [NOT_ERR substrings...] [COMMAND program])
 function(check name)
-  cmake_parse_arguments(C "" "RC;INPUT;COMMAND" "ARGS;OUT;ERR;NOT_OUT" ${ARGN})
+  cmake_parse_arguments(C "" "RC;INPUT;COMMAND" "ARGS;OUT;ERR;NOT_OUT;NOT_ERR" ${ARGN})
   if(NOT C_COMMAND)
     set(C_COMMAND "${MESHSWEEP}")
   endif()
@@ -73,6 +73,12 @@ function(check name)
     string(FIND "${err}" "${text}" at)
     if(at EQUAL -1)
       list(APPEND problems "stderr lacks '${text}'")
+    endif()
+  endforeach()
+  foreach(text IN LISTS C_NOT_ERR)
+    string(FIND "${err}" "${text}" at)
+    if(NOT at EQUAL -1)
+      list(APPEND problems "stderr has '${text}'")
     endif()
   endforeach()
   if(problems)
@@ -390,8 +396,8 @@ check(hausdorff_zero_diagonal_percent RC 0 ARGS hausdorff dot.off quad.off --tol
   OUT "(n/a% of A's diagonal)" NOT_OUT "(0.00000%")
 
 # Output files are written beside the destination and renamed over it: a run that fails
-# leaves an existing file as it was (dot.off has a zero diagonal, refused after --json was
-# opened); one that succeeds replaces it, keeping its permissions; a link is written through.
+# leaves an existing file as it was (dot.off has a zero diagonal); one that succeeds replaces
+# it, keeping its permissions; a link is written through.
 # expect(NAME CONDITION WHAT): CONDITION is an if() condition, evaluated here.
 function(expect name condition what)
   cmake_language(EVAL CODE "if(${condition})\n set(ok TRUE)\nelse()\n set(ok FALSE)\nendif()")
@@ -438,6 +444,40 @@ if(EXISTS /dev/full)
     endif()
   endforeach()
 endif()
+
+# hausdorff writes both its files whole before it puts either in place: a --colors that
+# cannot be written leaves --json as it was (found by an audit: the JSON was replaced), also
+# under a name with no room for ".partial-XXXXXX" (255 bytes at most; it was written in place).
+string(REPEAT "n" 245 long_name)
+set(long_name "${long_name}.json")
+foreach(json kept2.json "${long_name}")
+  file(WRITE "${WORK_DIR}/${json}" "keep\n")
+  if(EXISTS /dev/full)
+    check(output_both_or_neither RC 1 ARGS hausdorff quad.off quad.off --json "${json}" --colors /dev/full
+      ERR "meshsweep: /dev/full: write failed")
+    file(READ "${WORK_DIR}/${json}" kept)
+    expect(output_both_or_neither_content "kept STREQUAL \"keep\n\"" "${json} holds '${kept}'")
+  endif()
+  check(output_both_written RC 0 ARGS hausdorff quad.off quad.off --json "${json}" --colors colors.ply
+    OUT "Hausdorff distance in")
+  file(READ "${WORK_DIR}/${json}" kept)
+  string(FIND "${kept}" "\"hausdorff\"" at)
+  expect(output_both_written_content "NOT at EQUAL -1" "${json} holds '${kept}'")
+endforeach()
+file(GLOB hidden "${WORK_DIR}/.meshsweep-partial-*")
+expect(no_short_temporaries "NOT hidden" "left behind: ${hidden}")
+
+# An option's value is not read as an option ("--out -h" writes the file "-h"); an empty value
+# is refused, not taken for standard output.
+check(help_word_as_value RC 0 ARGS closest quad.off points.txt --out -h ERR "\"rows\": 3" NOT_OUT "Usage:")
+expect(help_word_as_value_file "EXISTS \"${WORK_DIR}/-h\"" "closest --out -h wrote no file '-h'")
+check(empty_value RC 2 ARGS closest quad.off points.txt --out=
+  ERR "meshsweep: closest: option --out needs a value, got an empty one")
+check(help_anywhere RC 0 ARGS closest --bogus --help OUT "Usage: meshsweep closest")
+
+# More threads than TBB allows (the cores) are capped quietly: no "TBB Warning" on stderr.
+check(hausdorff_many_threads RC 0 ARGS hausdorff quad.off quad.off --threads 4096 --json -
+  OUT "\"threads\": " NOT_ERR "TBB" "Warning")
 
 # No run leaves a temporary output file behind.
 file(GLOB_RECURSE partials "${WORK_DIR}/*.partial-*")
