@@ -36,6 +36,7 @@
 #include <tbb/task_arena.h>
 
 #include <algorithm>
+#include <atomic>
 #include <chrono>
 #include <cmath>
 #include <limits>
@@ -186,6 +187,20 @@ struct MeshCacheEntry {
   size_t vertex_count = 0, triangle_count = 0;
 };
 
+// Runs a call into a body's own class (RigidBody, KeyframeBody, DeformingBody): its
+// std::invalid_argument gets the service's call and the body in front ("DistanceService::setPose
+// (body 3): RigidBody: ..."), so that a program with many bodies knows which one was refused.
+template <class Call>
+decltype(auto) naming(const char* what, const std::string& body, Call&& call) {
+  try {
+    return call();
+  } catch (const std::invalid_argument& e) {
+    throw std::invalid_argument(std::string("DistanceService::") + what + " (" + body + "): " + e.what());
+  }
+}
+
+std::string bodyName(BodyHandle h) { return "body " + std::to_string(h.index); }
+
 bool hitOrder(const DistanceHit& a, const DistanceHit& b) {
   if (a.distance != b.distance) return a.distance < b.distance;
   if (a.body.index != b.body.index) return a.body.index < b.body.index;
@@ -194,7 +209,16 @@ bool hitOrder(const DistanceHit& a, const DistanceHit& b) {
 
 }  // namespace
 
+// Each service's number, for its handles (BodyHandle::service): 1, 2, ... (0 is no service's).
+uint32_t newServiceNumber() {
+  static std::atomic<uint32_t> next{1};
+  uint32_t number = next.fetch_add(1, std::memory_order_relaxed);
+  while (number == 0) number = next.fetch_add(1, std::memory_order_relaxed);  // after 2^32 services
+  return number;
+}
+
 struct DistanceService::Impl {
+  const uint32_t number = newServiceNumber();
   ServiceOptions options;
   unsigned threads = 0;
   std::unique_ptr<tbb::task_arena> arena;
@@ -211,8 +235,16 @@ struct DistanceService::Impl {
   std::vector<Vec3> positions_scratch;
   tbb::enumerable_thread_specific<Scratch> scratch;
 
+  BodyHandle handle(uint32_t slot) const { return {slot, bodies[slot].generation, number}; }
+  bool holds(BodyHandle h) const {
+    return h.service == number && h.index < bodies.size() && bodies[h.index].alive &&
+           bodies[h.index].generation == h.generation;
+  }
   Body& body(BodyHandle h, const char* what) {
-    if (h.index >= bodies.size() || !bodies[h.index].alive || bodies[h.index].generation != h.generation)
+    if (h.service != number && h.service != 0)
+      throw std::invalid_argument(std::string("DistanceService::") + what +
+                                  ": a body handle of another DistanceService (slot " + std::to_string(h.index) + ")");
+    if (!holds(h))
       throw std::invalid_argument(std::string("DistanceService::") + what + ": stale body handle (slot " +
                                   (h.index == kInvalidIndex ? std::string("none") : std::to_string(h.index)) +
                                   ", generation " + std::to_string(h.generation) + ")");
@@ -481,7 +513,7 @@ struct DistanceService::Impl {
     bodies[slot] = std::move(b);
     broadphase.set(slot, Box3{});
     ++live;
-    return {slot, bodies[slot].generation};
+    return handle(slot);
   }
 
   // A closed key-framed or deforming body's orientation at `pos`, its current positions.
@@ -618,7 +650,7 @@ struct DistanceService::Impl {
     const Body& b = bodies[slot];
     const BodyShape& shape = *b.shape;
     DistanceHit hit;
-    hit.body = {slot, b.generation};
+    hit.body = handle(slot);
     hit.triangle = face;
     hit.feature = feature;
     hit.barycentric = barycentric;
@@ -953,7 +985,7 @@ BodyHandle DistanceService::addRigid(std::shared_ptr<const Hierarchy> hierarchy,
   b.kind = BodyKind::kRigid;
   b.shape = shapeFor(hierarchy);
   b.rest = hierarchy->restGeometry();
-  b.rigid = std::make_unique<RigidBody>(std::move(hierarchy), pose);
+  naming("addRigid", "a new body", [&] { b.rigid = std::make_unique<RigidBody>(std::move(hierarchy), pose); });
   return impl_->add(std::move(b));
 }
 
@@ -963,8 +995,10 @@ BodyHandle DistanceService::addKeyframed(std::shared_ptr<const Hierarchy> hierar
   Body b;
   b.kind = BodyKind::kKeyframed;
   b.shape = shapeFor(hierarchy);
-  b.keyframed = std::make_unique<KeyframeBody>(std::move(hierarchy), std::move(frames));
-  b.keyframed->setTime(time);
+  naming("addKeyframed", "a new body", [&] {
+    b.keyframed = std::make_unique<KeyframeBody>(std::move(hierarchy), std::move(frames));
+    b.keyframed->setTime(time);
+  });
   Impl::keyframeOrientations(b);
   return impl_->add(std::move(b));
 }
@@ -976,11 +1010,13 @@ BodyHandle DistanceService::addDeforming(std::shared_ptr<const Hierarchy> hierar
   Body b;
   b.kind = BodyKind::kDeforming;
   b.shape = shapeFor(hierarchy);
-  b.deforming = std::make_unique<DeformingBody>(std::move(hierarchy));
-  b.deforming->setRadii(false);  // the service's queries read boxes only: anchors skip the radius phase
-  b.deforming->setRegionalDrift(impl_->options.regional_drift);
-  if (!positions.empty()) b.deforming->anchor(positions);
-  b.deforming->inflate(displacement_bound);
+  naming("addDeforming", "a new body", [&] {
+    b.deforming = std::make_unique<DeformingBody>(std::move(hierarchy));
+    b.deforming->setRadii(false);  // the service's queries read boxes only: anchors skip the radius phase
+    b.deforming->setRegionalDrift(impl_->options.regional_drift);
+    if (!positions.empty()) b.deforming->anchor(positions);
+    b.deforming->inflate(displacement_bound);
+  });
   b.displacement_bound = displacement_bound;
   Impl::anchorOrientation(b, b.deforming->positions());
   return impl_->add(std::move(b));
@@ -999,17 +1035,14 @@ void DistanceService::remove(BodyHandle handle) {
   impl_->removed_states = true;  // its states are dropped at the next step
 }
 
-bool DistanceService::contains(BodyHandle h) const {
-  return h.index < impl_->bodies.size() && impl_->bodies[h.index].alive &&
-         impl_->bodies[h.index].generation == h.generation;
-}
+bool DistanceService::contains(BodyHandle h) const { return impl_->holds(h); }
 
 size_t DistanceService::bodyCount() const { return impl_->live; }
 
 std::vector<BodyHandle> DistanceService::bodies() const {
   std::vector<BodyHandle> out;
   for (uint32_t s = 0; s < impl_->bodies.size(); ++s)
-    if (impl_->bodies[s].alive) out.push_back({s, impl_->bodies[s].generation});
+    if (impl_->bodies[s].alive) out.push_back(impl_->handle(s));
   return out;
 }
 
@@ -1019,7 +1052,7 @@ const BodyShape& DistanceService::shape(BodyHandle body) const { return *impl_->
 
 void DistanceService::setPose(BodyHandle body, const Eigen::Isometry3d& pose) {
   Body& b = impl_->body(body, "setPose", BodyKind::kRigid);
-  b.rigid->setPose(pose);
+  naming("setPose", bodyName(body), [&] { b.rigid->setPose(pose); });
   b.box_dirty = true;
 }
 
@@ -1051,7 +1084,8 @@ PositionsUpdate DistanceService::setPositions(BodyHandle body, const std::vector
   Body& b = impl_->body(body, "setPositions", BodyKind::kDeforming);
   // In the service's arena: the inline faces' refresh runs on its threads.
   PositionsUpdate update;
-  impl_->arena->execute([&] { update = impl_->applyPositions(b, positions); });
+  naming("setPositions", bodyName(body),
+         [&] { impl_->arena->execute([&] { update = impl_->applyPositions(b, positions); }); });
   return update;
 }
 

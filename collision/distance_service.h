@@ -45,14 +45,17 @@ namespace meshsweeper {
 using PointMatrix = Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor>;
 using PointsRef = Eigen::Ref<const PointMatrix>;
 
-// A body of a DistanceService: slot index and generation. A handle stays valid until its body
-// is removed; after that every use throws std::invalid_argument ("stale body handle"), even if
-// the slot holds a new body. A default-constructed handle is never valid.
+// A body of a DistanceService: slot index, generation and the service's own number. A handle
+// stays valid until its body is removed; after that every use throws std::invalid_argument
+// ("stale body handle"), even if the slot holds a new body. A handle of another service is
+// refused the same way ("a body handle of another DistanceService"), never taken for the body
+// in the same slot of this one. A default-constructed handle is never valid.
 struct BodyHandle {
   uint32_t index = kInvalidIndex;
   uint32_t generation = 0;
+  uint32_t service = 0;  // the DistanceService that made it (0: none)
   friend bool operator==(const BodyHandle& a, const BodyHandle& b) {
-    return a.index == b.index && a.generation == b.generation;
+    return a.index == b.index && a.generation == b.generation && a.service == b.service;
   }
   friend bool operator!=(const BodyHandle& a, const BodyHandle& b) { return !(a == b); }
 };

@@ -15,6 +15,10 @@ void RigidBody::setPose(const Eigen::Isometry3d& pose) {
   const Eigen::Matrix3d r = pose.linear();
   if (!pose.matrix().allFinite())
     throw std::invalid_argument("RigidBody: the pose has a non-finite entry");
+  // Eigen keeps the fourth row of an Isometry3d without reading it; one set to something else
+  // (through matrix()) would make pose().matrix() no rigid transform (found by an audit).
+  if (pose.matrix().row(3) != Eigen::RowVector4d(0, 0, 0, 1))
+    throw std::invalid_argument("RigidBody: the pose's last row is not (0, 0, 0, 1)");
   if (!inCoordinateRange(pose.translation()))
     throw std::invalid_argument("RigidBody: the pose's translation is beyond 1e150 in magnitude");
   // A rotation composed over many steps drifts from orthonormal (R = R * dR: 1e-12 after some

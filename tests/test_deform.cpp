@@ -784,9 +784,13 @@ TEST_CASE("rigid bodies: non-rigid poses throw", "[deform][rigid]") {
     }
   }
   RigidBody body(h, good);
+  // A fourth row set through matrix(), which Eigen keeps without reading (found by an audit).
+  Eigen::Isometry3d last_row = good;
+  last_row.matrix()(3, 0) = 5;
   for (const auto& [name, pose] : std::vector<std::pair<const char*, Eigen::Isometry3d>>{
            {"scale 1.01", scaled}, {"shear", shear}, {"mirror", mirror}, {"NaN translation", nan_translation},
-           {"infinite rotation entry", inf_rotation}, {"translation beyond 1e150", huge_translation}}) {
+           {"infinite rotation entry", inf_rotation}, {"translation beyond 1e150", huge_translation},
+           {"last row (5, 0, 0, 1)", last_row}}) {
     INFO("pose: " << name);
     CHECK_THROWS_AS(RigidBody(h, pose), std::invalid_argument);
     CHECK_THROWS_AS(body.setPose(pose), std::invalid_argument);
@@ -795,6 +799,7 @@ TEST_CASE("rigid bodies: non-rigid poses throw", "[deform][rigid]") {
   // A mirror is orthonormal: the message says what it is (found by review).
   CHECK_THROWS_WITH(RigidBody(h, mirror), Catch::Contains("reflection"));
   CHECK_THROWS_WITH(RigidBody(h, scaled), Catch::Contains("not orthonormal"));
+  CHECK_THROWS_WITH(RigidBody(h, last_row), Catch::Contains("last row is not (0, 0, 0, 1)"));
 }
 
 TEST_CASE("key frames: bounds proven and queries exact at every time", "[deform][keyframe]") {

@@ -1295,6 +1295,46 @@ TEST_CASE("bad input: NaN points, stale handles, wrong sizes, wrong kinds", "[se
     CHECK_THROWS_WITH(service.positions(deforming), Catch::Contains("stale body handle"));
     CHECK(service.positions(again).size() == sphere.positions.size());
   }
+  // Found by an audit: every service numbered its handles alike, so another service's handle
+  // moved or removed this one's body in the same slot.
+  SECTION("a handle of another service is refused, never taken for this one's body") {
+    DistanceService other(ServiceOptions{1});
+    const BodyHandle foreign = other.addRigid(other.hierarchyFor(sphere));
+    REQUIRE(foreign.index == rigid.index);
+    REQUIRE(foreign.generation == rigid.generation);
+    CHECK(foreign != rigid);
+    CHECK(other.contains(foreign));
+    CHECK_FALSE(service.contains(foreign));
+    Eigen::Isometry3d far = Eigen::Isometry3d::Identity();
+    far.translation() = Vec3(100, 0, 0);
+    CHECK_THROWS_WITH(service.setPose(foreign, far), Catch::Contains("a body handle of another DistanceService"));
+    CHECK_THROWS_WITH(service.remove(foreign), Catch::Contains("another DistanceService"));
+    CHECK_THROWS_WITH(service.kind(foreign), Catch::Contains("another DistanceService"));
+    CHECK(service.pose(rigid).translation() == Vec3::Zero());
+    CHECK(service.bodyCount() == 3);
+    // Handles given back by the service, and hits, name it.
+    const StepResult result = service.step(toMatrix({Vec3(2, 0, 0)}), 5.0);
+    REQUIRE(result.closest(0));
+    CHECK(service.contains(result.closest(0)->body));
+    CHECK_FALSE(other.contains(result.closest(0)->body));
+    for (const BodyHandle h : service.bodies()) CHECK_FALSE(other.contains(h));
+  }
+  // Found by an audit: the body classes' messages did not say which call or body they came from.
+  SECTION("errors of the bodies' own checks name the call and the body") {
+    Eigen::Isometry3d nan_pose = Eigen::Isometry3d::Identity();
+    nan_pose.translation().x() = nan;
+    CHECK_THROWS_WITH(service.setPose(rigid, nan_pose),
+                      Catch::StartsWith("DistanceService::setPose (body " + std::to_string(rigid.index) + "): RigidBody: "));
+    std::vector<Vec3> bad = sphere.positions;
+    bad[2].y() = nan;
+    CHECK_THROWS_WITH(service.setPositions(deforming, bad),
+                      Catch::StartsWith("DistanceService::setPositions (body " + std::to_string(deforming.index) +
+                                        "): DeformingBody: position 2"));
+    CHECK_THROWS_WITH(service.addKeyframed(hierarchy, {}),
+                      Catch::StartsWith("DistanceService::addKeyframed (a new body): KeyframeBody: "));
+    CHECK_THROWS_WITH(service.addRigid(hierarchy, nan_pose), Catch::StartsWith("DistanceService::addRigid (a new body): "));
+    CHECK(service.bodyCount() == 3);
+  }
   SECTION("positions of the wrong size or not finite: error, body unchanged") {
     std::vector<Vec3> short_positions(sphere.positions.begin(), sphere.positions.end() - 1);
     CHECK_THROWS_AS(service.setPositions(deforming, short_positions), std::invalid_argument);
