@@ -8,7 +8,7 @@
 //    closedness, rest pseudonormals), one per mesh whatever the number of bodies using it;
 //  - per body, per step: pose, key-frame time or deformed positions with their bounds
 //    (deform/), and the body's world box, recomputed once per step when it changed;
-//  - per (point, body) pair: a CoherentState (core/sweep_query.h, 368 bytes) carried from one
+//  - per (point, body) pair: a CoherentState (core/sweep_query.h, 376 bytes) carried from one
 //    step to the next, plus one QueryStream per thread and body that lends scratch memory.
 //
 // Coherent-state policy: a step keeps exactly the states of the (point, body) pairs it queried
