@@ -1,12 +1,72 @@
 #include "scenes/output_file.h"
 
+#include <atomic>
 #include <cerrno>
+#include <csignal>
+#include <cstring>
 
 #include <fcntl.h>
+#include <signal.h>
 #include <sys/stat.h>
 #include <unistd.h>
 
 namespace meshsweeper {
+
+namespace {
+
+// Temporary output files that an interrupted run removes: a fixed table of C strings, which
+// the signal handler reads (async-signal-safe: no allocation, no locks).
+constexpr int kMaxTemporaries = 8;
+constexpr size_t kMaxTemporaryPath = 4096;
+char g_temporaries[kMaxTemporaries][kMaxTemporaryPath];
+volatile sig_atomic_t g_temporary_used[kMaxTemporaries];
+// Every signal whose default action ends the process and that a program may catch, save the
+// ones a fault raises (SIGSEGV, SIGBUS, SIGFPE, SIGILL, SIGABRT, SIGTRAP, SIGSYS): an
+// interrupt, a timer, a full file (SIGXFSZ), a closed pipe, a user's signal.
+constexpr int kCleanupSignals[] = {SIGINT,  SIGTERM, SIGHUP,    SIGQUIT, SIGPIPE, SIGALRM, SIGUSR1,
+                                   SIGUSR2, SIGXCPU, SIGXFSZ, SIGVTALRM, SIGPROF, SIGIO};
+
+extern "C" void removeTemporariesAndResignal(int signal) {
+  for (int i = 0; i < kMaxTemporaries; ++i)
+    if (g_temporary_used[i]) ::unlink(g_temporaries[i]);
+  // The handler was reset on entry (SA_RESETHAND): the signal, blocked until the handler
+  // returns, then ends the process as it would have.
+  ::raise(signal);
+}
+
+// Installs the handler for signals that have their default action now (an ignored SIGHUP,
+// under nohup, stays ignored; a program's own handler is kept).
+void installCleanup() {
+  for (const int sig : kCleanupSignals) {
+    struct sigaction old {};
+    if (::sigaction(sig, nullptr, &old) != 0 || old.sa_handler != SIG_DFL) continue;
+    struct sigaction act {};
+    act.sa_handler = removeTemporariesAndResignal;
+    sigemptyset(&act.sa_mask);
+    act.sa_flags = SA_RESETHAND;
+    ::sigaction(sig, &act, nullptr);
+  }
+}
+
+// Registers a temporary file for removal on a signal (quietly not, past the table's size).
+void registerTemporary(const std::string& path) {
+  if (path.size() >= kMaxTemporaryPath) return;
+  installCleanup();
+  for (int i = 0; i < kMaxTemporaries; ++i) {
+    if (g_temporary_used[i]) continue;
+    std::memcpy(g_temporaries[i], path.c_str(), path.size() + 1);
+    std::atomic_signal_fence(std::memory_order_seq_cst);  // the name is whole before it is used
+    g_temporary_used[i] = 1;
+    return;
+  }
+}
+
+void unregisterTemporary(const std::string& path) {
+  for (int i = 0; i < kMaxTemporaries; ++i)
+    if (g_temporary_used[i] && path == g_temporaries[i]) g_temporary_used[i] = 0;
+}
+
+}  // namespace
 
 std::filesystem::path outputDestination(const std::string& name) {
   namespace fs = std::filesystem;
@@ -52,6 +112,7 @@ int openOutput(const std::string& path, OpenOutput& out) {
         return error;
       }
       out.temporary = name;
+      registerTemporary(name);
       out.target = target;
       if (exists) {
         out.mode = st.st_mode & 07777;
@@ -96,8 +157,18 @@ int finishOutput(OpenOutput& out, bool write_failed, bool* at_rename) {
     if (at_rename) *at_rename = true;
   }
   if (error && !out.temporary.empty()) ::unlink(out.temporary.c_str());
-  if (!error) out.temporary.clear();
+  unregisterTemporary(out.temporary);  // after the rename or the removal: nothing is left between
+  out.temporary.clear();
   return error;
+}
+
+void discardOutput(OpenOutput& out) {
+  if (out.file) std::fclose(out.file);
+  out.file = nullptr;
+  if (out.temporary.empty()) return;
+  ::unlink(out.temporary.c_str());
+  unregisterTemporary(out.temporary);
+  out.temporary.clear();
 }
 
 }  // namespace meshsweeper

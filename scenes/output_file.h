@@ -29,7 +29,10 @@ struct OpenOutput {
 };
 
 // Opens `path` for writing: 0, or the errno value that says why it cannot be written (an
-// existing file that is not writable included; nothing is left behind).
+// existing file that is not writable included; nothing is left behind). A temporary file is
+// removed by a signal that ends the process (SIGINT, SIGTERM, SIGHUP, SIGQUIT, SIGPIPE, the
+// timers', SIGXFSZ, ...: a handler is installed for those that have their default action)
+// until finishOutput() or discardOutput().
 int openOutput(const std::string& path, OpenOutput& out);
 
 // Flushes and closes out.file, then puts a temporary in place. `write_failed`: one of the
@@ -37,5 +40,9 @@ int openOutput(const std::string& path, OpenOutput& out);
 // set none), the destination then as it was and the temporary removed; *at_rename tells
 // whether it was the rename. A file system that refuses the permissions is no failure.
 int finishOutput(OpenOutput& out, bool write_failed, bool* at_rename = nullptr);
+
+// Closes out.file and removes its temporary, the destination left as it was: for a run that
+// gives up before finishOutput().
+void discardOutput(OpenOutput& out);
 
 }  // namespace meshsweeper

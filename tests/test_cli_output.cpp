@@ -3,6 +3,7 @@
 // that fails, throws or is interrupted leaves an existing file as it was and no temporary file
 // behind.
 #include "core/mesh.h"
+#include "scenes/output_file.h"
 #include "scenes/render.h"
 #include "tools/cli.h"
 
@@ -15,6 +16,7 @@
 
 #include <algorithm>
 #include <csignal>
+#include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <sstream>
@@ -298,6 +300,30 @@ TEST_CASE("png: written whole beside the destination, renamed over it, permissio
   CHECK(fs::is_symlink(s.dir / "link.png"));
   CHECK(isPng(readFile(s.path("sub/target.png"))));
   CHECK(s.names() == std::vector<std::string>{"link.png", "picture.png", "sub"});
+}
+
+// The pictures' temporary files are removed on a signal too (openOutput registers them; they
+// were the tool's own outputs' only).
+TEST_CASE("png: a signal between opening and finishing leaves no temporary file", "[cli][output][png]") {
+  Scratch s("png_signal");
+  const std::string file = s.path("picture.png");
+  writeFile(file, "keep\n");
+  const pid_t child = ::fork();
+  REQUIRE(child >= 0);
+  if (child == 0) {
+    std::signal(SIGTERM, SIG_DFL);
+    meshsweeper::OpenOutput out;
+    if (meshsweeper::openOutput(file, out) != 0 || out.temporary.empty()) ::_exit(3);
+    std::fputs("half a picture", out.file);
+    std::fflush(out.file);
+    ::raise(SIGTERM);
+    ::_exit(0);  // not reached
+  }
+  int status = 0;
+  REQUIRE(::waitpid(child, &status, 0) == child);
+  CHECK(WIFSIGNALED(status));
+  CHECK(readFile(file) == "keep\n");
+  CHECK(s.names() == std::vector<std::string>{"picture.png"});
 }
 
 TEST_CASE("png: a destination that cannot be written is named in the error and left as it was", "[cli][output][png]") {

@@ -1,6 +1,5 @@
 #include "tools/cli.h"
 
-#include <atomic>
 #include <cctype>
 #include <cerrno>
 #include <cmath>
@@ -8,68 +7,11 @@
 #include <cstdlib>
 #include <cstring>
 
-#include <fcntl.h>
-#include <signal.h>
-#include <sys/stat.h>
-#include <unistd.h>
-
 namespace meshsweeper::cli {
 
 namespace {
 
 constexpr size_t kOutputBufferBytes = 1 << 16;
-
-// Temporary output files that an interrupted run removes: a fixed table of C strings, which
-// the signal handler reads (async-signal-safe: no allocation, no locks).
-constexpr int kMaxTemporaries = 8;
-constexpr size_t kMaxTemporaryPath = 4096;
-char g_temporaries[kMaxTemporaries][kMaxTemporaryPath];
-volatile sig_atomic_t g_temporary_used[kMaxTemporaries];
-// Every signal whose default action ends the process and that a program may catch, save the
-// ones a fault raises (SIGSEGV, SIGBUS, SIGFPE, SIGILL, SIGABRT, SIGTRAP, SIGSYS): an
-// interrupt, a timer, a full file (SIGXFSZ), a closed pipe, a user's signal.
-constexpr int kCleanupSignals[] = {SIGINT,  SIGTERM, SIGHUP,    SIGQUIT, SIGPIPE, SIGALRM, SIGUSR1,
-                                   SIGUSR2, SIGXCPU, SIGXFSZ, SIGVTALRM, SIGPROF, SIGIO};
-
-extern "C" void removeTemporariesAndResignal(int signal) {
-  for (int i = 0; i < kMaxTemporaries; ++i)
-    if (g_temporary_used[i]) ::unlink(g_temporaries[i]);
-  // The handler was reset on entry (SA_RESETHAND): the signal, blocked until the handler
-  // returns, then ends the process as it would have.
-  ::raise(signal);
-}
-
-// Installs the handler for signals that have their default action now (an ignored SIGHUP,
-// under nohup, stays ignored; a program's own handler is kept).
-void installCleanup() {
-  for (const int sig : kCleanupSignals) {
-    struct sigaction old {};
-    if (::sigaction(sig, nullptr, &old) != 0 || old.sa_handler != SIG_DFL) continue;
-    struct sigaction act {};
-    act.sa_handler = removeTemporariesAndResignal;
-    sigemptyset(&act.sa_mask);
-    act.sa_flags = SA_RESETHAND;
-    ::sigaction(sig, &act, nullptr);
-  }
-}
-
-// Registers a temporary file for removal on a signal (quietly not, past the table's size).
-void registerTemporary(const std::string& path) {
-  if (path.size() >= kMaxTemporaryPath) return;
-  installCleanup();
-  for (int i = 0; i < kMaxTemporaries; ++i) {
-    if (g_temporary_used[i]) continue;
-    std::memcpy(g_temporaries[i], path.c_str(), path.size() + 1);
-    std::atomic_signal_fence(std::memory_order_seq_cst);  // the name is whole before it is used
-    g_temporary_used[i] = 1;
-    return;
-  }
-}
-
-void unregisterTemporary(const std::string& path) {
-  for (int i = 0; i < kMaxTemporaries; ++i)
-    if (g_temporary_used[i] && path == g_temporaries[i]) g_temporary_used[i] = 0;
-}
 
 const OptionSpec* findSpec(const std::vector<OptionSpec>& specs, const std::string& name) {
   for (const OptionSpec& spec : specs) {
@@ -207,19 +149,10 @@ Output::Output(const std::string& path) : path_(path) {
   if (const int error = openOutput(path_, out_))
     throw IoError(path_ + ": cannot open for writing: " + std::strerror(error));
   owned_ = true;
-  if (!out_.temporary.empty()) registerTemporary(out_.temporary);
 }
 
 Output::~Output() {
-  if (owned_ && out_.file) std::fclose(out_.file);
-  discardTemporary();
-}
-
-void Output::discardTemporary() {
-  if (out_.temporary.empty()) return;
-  unregisterTemporary(out_.temporary);
-  ::unlink(out_.temporary.c_str());
-  out_.temporary.clear();
+  if (owned_) discardOutput(out_);
 }
 
 void Output::flushBuffer() {
@@ -261,11 +194,8 @@ void Output::close() {
     return;
   }
   owned_ = false;
-  const std::string temporary = out_.temporary;
   bool at_rename = false;
   const int error = finishOutput(out_, failed_, &at_rename);  // removes the temporary if it fails
-  if (!temporary.empty()) unregisterTemporary(temporary);
-  out_.temporary.clear();
   if (at_rename) throw IoError(name + ": cannot replace: " + std::strerror(error));
   if (error) throw IoError(name + ": write failed");
 }

@@ -121,7 +121,6 @@ class Output {
   std::string buffer_;
   bool failed_ = false;
   void flushBuffer();
-  void discardTemporary();
 };
 
 using meshsweeper::outputDestination;  // scenes/output_file.h
