@@ -1093,6 +1093,9 @@ double effectiveTolerance(const HausdorffOptions& options, const Mesh& a) {
   if (!(tolerance > 0))
     throw std::invalid_argument("hausdorff: " + (a.name.empty() ? std::string("mesh A") : a.name) +
                                 " has zero extent; give an absolute tolerance");
+  // Found by an audit: --relative 1e308 made an infinite tolerance, printed as inf%.
+  if (!std::isfinite(tolerance))
+    throw std::invalid_argument("hausdorff: the relative tolerance times A's diagonal is beyond the largest double");
   return tolerance;
 }
 

@@ -123,7 +123,8 @@ struct HausdorffResult {
 // Symmetric Hausdorff distance H(A, B) with both one-sided distances.
 // Throws MeshError if a mesh fails checkMesh() (empty, non-finite, indices out of range) and
 // std::invalid_argument if the tolerance is negative, NaN or infinite, or if the effective
-// tolerance is 0 (relative tolerance on a mesh of zero extent).
+// tolerance is 0 (relative tolerance on a mesh of zero extent) or infinite (a relative one
+// past the largest double over A's diagonal).
 HausdorffResult hausdorff(const Mesh& a, const Mesh& b, const HausdorffOptions& options = {});
 // The same with hierarchies the caller already built (shared, read-only; a null one throws
 // std::invalid_argument). The relative tolerance uses the diagonal of a->mesh(). build_seconds

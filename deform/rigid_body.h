@@ -11,7 +11,8 @@ namespace meshsweeper {
 class RigidBody {
  public:
   // Places `hierarchy` at `pose`. Throws std::invalid_argument if the pose is not rigid
-  // (rotation not orthonormal with determinant 1, to 1e-9) or not finite. A rotation off
+  // (rotation not orthonormal with determinant 1, to 1e-9; matrix()'s last row not 0 0 0 1),
+  // not finite, or translated beyond 1e150. A rotation off
   // orthonormal by more than rounding (one composed over many steps) is re-orthonormalised:
   // pose() returns the pose the body has, for which every answer is exact.
   explicit RigidBody(std::shared_ptr<const Hierarchy> hierarchy,

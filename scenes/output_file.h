@@ -2,6 +2,7 @@
 // Output files written beside their destination and renamed over it (README "Output files"),
 // shared by the tool's outputs (tools/cli.h, Output) and the scenes' pictures
 // (Image::writePng): a write that fails or is interrupted leaves the destination as it was.
+#include <cstddef>
 #include <cstdio>
 #include <filesystem>
 #include <string>
@@ -16,16 +17,20 @@ std::filesystem::path outputDestination(const std::string& name);
 // to a temporary file beside its destination ("NAME.partial-XXXXXX"), which finishOutput()
 // renames over it with the permissions of the file it replaces (a new one's: 0666 less the
 // umask); a symbolic link is written through. Anything else (a device, a pipe, a file with
-// several names, a link that leads nowhere) is written in place, and so is a writable file in
-// a directory where no temporary can be created; a name too long for the suffix gets a short
-// temporary in the same directory (".meshsweep-partial-XXXXXX"). A file written in place is
-// not truncated when opened, only cut to what was written when finished, so a run that fails
-// before writing leaves it as it was.
+// several names, a link that leads nowhere, /proc's link to a pipe) is written in place, and
+// so is a writable file in a directory where no temporary can be created or another user's
+// file in a sticky directory (a rename could not replace it); a name too long for the suffix
+// gets a short temporary in the same directory (".meshsweep-partial-XXXXXX"), and a path too
+// long for any (past PATH_MAX) is refused. A regular file written in
+// place is not truncated when opened, only cut by the first writeOutput() (or finishOutput(),
+// when nothing was written), so a run that fails before writing leaves it as it was; one that
+// fails after its first write leaves it partly written.
 struct OpenOutput {
   std::FILE* file = nullptr;
   std::string temporary;  // the file written ("": in place)
   std::string target;     // the destination, links followed (with a temporary)
   unsigned mode = 0;      // the permissions target gets (with a temporary)
+  bool cut_pending = false;  // a regular file in place, not cut yet (writeOutput())
 };
 
 // Opens `path` for writing: 0, or the errno value that says why it cannot be written (an
@@ -34,6 +39,10 @@ struct OpenOutput {
 // timers', SIGXFSZ, ...: a handler is installed for those that have their default action)
 // until finishOutput() or discardOutput().
 int openOutput(const std::string& path, OpenOutput& out);
+
+// Writes `size` bytes to out.file (every write goes through here: a file written in place is
+// cut before the first). False when the write failed (errno says why).
+bool writeOutput(OpenOutput& out, const void* data, size_t size);
 
 // Flushes and closes out.file, then puts a temporary in place. `write_failed`: one of the
 // caller's writes failed. Returns 0, or the errno value of what failed (EIO for a write that

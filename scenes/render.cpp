@@ -313,7 +313,7 @@ void Image::writePng(const std::string& path) const {
   // then renamed over it.
   OpenOutput out;
   if (const int error = openOutput(path, out)) throw fail(std::strerror(error));
-  const bool write_failed = std::fwrite(encoded.data(), 1, size, out.file) != size;
+  const bool write_failed = !writeOutput(out, encoded.data(), size);
   const int write_error = write_failed ? errno : 0;
   if (const int error = finishOutput(out, write_failed)) throw fail(std::strerror(write_error ? write_error : error));
   png_image_free(&image);

@@ -7,6 +7,8 @@
 #include <cstdlib>
 #include <cstring>
 
+#include <sys/stat.h>
+
 namespace meshsweeper::cli {
 
 namespace {
@@ -140,10 +142,25 @@ double parseFiniteDouble(const std::string& text, const std::string& what) {
   return x;
 }
 
+int standardStreamOf(const std::string& path) {
+  if (path == "-") return 1;
+  struct stat named {};
+  if (::stat(path.c_str(), &named) != 0) return 0;
+  for (const int fd : {1, 2}) {
+    struct stat stream {};
+    if (::fstat(fd, &stream) == 0 && stream.st_dev == named.st_dev && stream.st_ino == named.st_ino) return fd;
+  }
+  return 0;
+}
+
 Output::Output(const std::string& path) : path_(path) {
   buffer_.reserve(kOutputBufferBytes);
-  if (path_ == "-") {
-    out_.file = stdout;
+  // A name of standard output or error (/dev/stdout, /dev/fd/2, the file they write to) is
+  // written through the stream: reopening it would start at the file's beginning, or fail on
+  // a pipe (found by an audit).
+  if (const int stream = standardStreamOf(path_)) {
+    out_.file = stream == 1 ? stdout : stderr;
+    path_ = stream == 1 ? "standard output" : "standard error";
     return;
   }
   if (const int error = openOutput(path_, out_))
@@ -156,8 +173,7 @@ Output::~Output() {
 }
 
 void Output::flushBuffer() {
-  if (!buffer_.empty() && std::fwrite(buffer_.data(), 1, buffer_.size(), out_.file) != buffer_.size())
-    failed_ = true;
+  if (!buffer_.empty() && !writeOutput(out_, buffer_.data(), buffer_.size())) failed_ = true;
   buffer_.clear();
 }
 
@@ -182,22 +198,21 @@ void Output::printf(const char* format, ...) {
 void Output::flush() {
   flushBuffer();
   if (std::fflush(out_.file) != 0) failed_ = true;
-  if (failed_) throw IoError((path_ == "-" ? std::string("standard output") : path_) + ": write failed");
+  if (failed_) throw IoError(path_ + ": write failed");
 }
 
 void Output::close() {
   flushBuffer();
-  const std::string name = path_ == "-" ? std::string("standard output") : path_;
-  if (!owned_) {  // standard output
+  if (!owned_) {  // standard output or error
     if (std::fflush(out_.file) != 0) failed_ = true;
-    if (failed_) throw IoError(name + ": write failed");
+    if (failed_) throw IoError(path_ + ": write failed");
     return;
   }
   owned_ = false;
   bool at_rename = false;
   const int error = finishOutput(out_, failed_, &at_rename);  // removes the temporary if it fails
-  if (at_rename) throw IoError(name + ": cannot replace: " + std::strerror(error));
-  if (error) throw IoError(name + ": write failed");
+  if (at_rename) throw IoError(path_ + ": cannot replace: " + std::strerror(error));
+  if (error) throw IoError(path_ + ": write failed");
 }
 
 std::string jsonString(const std::string& text) {

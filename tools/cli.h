@@ -84,17 +84,24 @@ uint64_t parseInteger(const std::string& text, const std::string& what, uint64_t
 // Parses a whole string as a finite double; throws UsageError.
 double parseFiniteDouble(const std::string& text, const std::string& what);
 
-// An output destination: a file, or standard output for "-". Writes are buffered; close()
-// flushes and throws IoError if anything failed.
+// 1 or 2 when `path` names standard output ("-" included) or standard error (/dev/stdout,
+// /dev/fd/2, /proc/self/fd/1, the file a stream is redirected to), else 0.
+int standardStreamOf(const std::string& path);
+
+// An output destination: a file, or standard output for "-" (or standard error), written
+// through the stream when named by another name too (standardStreamOf). Writes are buffered;
+// close() flushes and throws IoError if anything failed.
 //
 // A regular file (new, or existing with one name) is written to a temporary file beside it
-// ("NAME.partial-XXXXXX", created at once: the commands construct it once their inputs are
-// read, an output written in place could be one of them, and before the long work) that close()
-// renames over it: a run that fails, throws or is interrupted (SIGINT, SIGTERM, SIGHUP) leaves
-// the file as it was and removes the temporary one. An existing file keeps its permissions; a
-// symbolic link is written through (its target is replaced, the link stays). Anything else (a
-// device, a pipe, /dev/stdout, a file with several hard links) is written in place, not
-// truncated before the first write (scenes/output_file.h).
+// ("NAME.partial-XXXXXX", or ".meshsweep-partial-XXXXXX" in its directory for a name too long
+// for the suffix; created at once: the commands construct it once their inputs are read, an
+// output written in place could be one of them, and before the long work) that close()
+// renames over it: a run that fails, throws or is interrupted (by a signal that ends it:
+// SIGINT, SIGTERM, SIGHUP, SIGQUIT, SIGPIPE, SIGXFSZ, ...) leaves the file as it was and
+// removes the temporary one. An existing file keeps its permissions; a symbolic link is
+// written through (its target is replaced, the link stays). Anything else (a device, a pipe,
+// /dev/stdout, a file with several hard links) is written in place: a regular one is cut at
+// the first write, not when opened (scenes/output_file.h).
 class Output {
  public:
   explicit Output(const std::string& path);
@@ -106,16 +113,19 @@ class Output {
   void write(const std::string& text) { write(text.data(), text.size()); }
   // printf-style formatted line or fragment (at most 1024 characters per call).
   void printf(const char* format, ...) __attribute__((format(printf, 2, 3)));
-  // Writes out what is buffered; throws IoError ("PATH: write failed") if any write failed,
-  // the destination then unchanged. Lets a command check all its outputs before it puts any
-  // in place.
+  // Writes out what is buffered; throws IoError ("PATH: write failed") if any write failed.
+  // Lets a command check all its outputs before it puts any in place: a file with a temporary
+  // is then unchanged (one written in place may be partly written; inPlace()).
   void flush();
+  // Written in place (standard output, a device, a pipe, a file with several names), not
+  // through a temporary file.
+  bool inPlace() const { return !owned_ || out_.temporary.empty(); }
   // Flushes and puts the file in place; throws IoError ("PATH: write failed") if any write
   // failed, the destination then unchanged.
   void close();
 
  private:
-  std::string path_;
+  std::string path_;      // for messages: the name, "standard output" or "standard error"
   OpenOutput out_;       // the file (standard output, or opened by openOutput())
   bool owned_ = false;   // opened here (not standard output), not yet closed
   std::string buffer_;

@@ -7,8 +7,6 @@
 
 #include <Eigen/Geometry>
 
-#include <sys/stat.h>
-
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -16,6 +14,7 @@
 #include <limits>
 #include <memory>
 #include <string>
+#include <vector>
 
 #include <unistd.h>
 
@@ -89,15 +88,8 @@ std::string percentEstimate(double value, double diagonal) {
   return text;
 }
 
-bool isStandardOutput(const std::string& path) { return path.empty() || path == "-"; }
-
 // "-", or a name of the file standard output writes to (/dev/stdout, /proc/self/fd/1, ...).
-bool namesStandardOutput(const std::string& path) {
-  if (isStandardOutput(path)) return true;
-  struct stat out {}, named {};
-  return fstat(1, &out) == 0 && stat(path.c_str(), &named) == 0 && out.st_dev == named.st_dev &&
-         out.st_ino == named.st_ino;
-}
+bool namesStandardOutput(const std::string& path) { return standardStreamOf(path) == 1; }
 
 // Whether two output paths are one destination: both standard output, the same existing file
 // under two names, or one new file reached two ways ("r.json", "./r.json", a link to it).
@@ -236,6 +228,9 @@ int runHausdorff(int argc, char** argv, int first) {
   const double diagonal = meshDiagonal(a);
   if (!(diagonal > 0) && !(options.tolerance > 0))
     throw MeshError(a_path + ": all vertices coincide (zero diagonal); give --tolerance");
+  if (!(options.tolerance > 0) && !std::isfinite(options.relative_tolerance * diagonal))
+    throw UsageError("hausdorff: --relative " + args.value("--relative") +
+                     " times A's diagonal is beyond the largest double");
   // Output files are opened (created) before the computation, so a bad path fails at once.
   std::unique_ptr<Output> json_out, colors_out;
   if (args.has("--json"))
@@ -295,12 +290,20 @@ int runHausdorff(int argc, char** argv, int first) {
         ",\n  \"triangles_refined\": " + std::to_string(r.counters.triangles_refined) + "\n}\n");
   }
   if (colors_out) writeColors(*colors_out, a, r.a_to_b.vertex_distance);
-  // Both written whole before either replaces its destination: a failed write leaves both as
-  // they were.
-  for (Output* out : {json_out.get(), colors_out.get()})
-    if (out) out->flush();
-  for (Output* out : {json_out.get(), colors_out.get()})
-    if (out) out->close();
+  // Both written whole before either replaces its destination: those with a temporary file
+  // first, then the PLY, then the JSON (buffered whole, it reaches a file written in place only
+  // once the others are written). So a failed write leaves both as they were; only a large PLY
+  // written in place (a device, a file with several names) may be left partly written.
+  // The summary first: a stream that cannot take it (full, or a closed pipe) fails the run
+  // before any file is replaced (found by an audit).
+  if (std::fflush(s) != 0 || std::ferror(s))
+    throw IoError(std::string(s == stdout ? "standard output" : "standard error") + ": write failed");
+  std::vector<Output*> outputs;
+  for (Output* out : {colors_out.get(), json_out.get()})
+    if (out) outputs.push_back(out);
+  std::stable_partition(outputs.begin(), outputs.end(), [](const Output* out) { return !out->inPlace(); });
+  for (Output* out : outputs) out->flush();
+  for (Output* out : outputs) out->close();
   return kExitOk;
 }
 

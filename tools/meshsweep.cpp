@@ -11,6 +11,7 @@
 #include <exception>
 #include <new>
 #include <string>
+#include <vector>
 
 namespace meshsweeper::cli {
 
@@ -58,21 +59,29 @@ void printUsage(std::FILE* stream) {
                "2 bad command line.\n");
 }
 
-int runHelp(int argc, char** argv, int first) {
-  if (first >= argc) {
-    printUsage(stdout);
-    return kExitOk;
-  }
-  if (first + 1 < argc) throw UsageError(std::string("help: unexpected argument '") +
-                                         argv[first + 1] + "'");
-  const Command* command = findCommand(argv[first]);
-  if (!command) throw UsageError(std::string("help: unknown command '") + argv[first] + "'");
-  std::fputs(command->help, stdout);
-  return kExitOk;
-}
-
 bool isHelpFlag(const char* arg) {
   return std::strcmp(arg, "--help") == 0 || std::strcmp(arg, "-h") == 0;
+}
+
+// "help [COMMAND]"; a help flag among its words asks for help's own usage when no command is
+// named ("help --help"), else is redundant ("help closest -h").
+int runHelp(int argc, char** argv, int first) {
+  std::vector<const char*> words;
+  bool flag = false;
+  for (int i = first; i < argc; ++i) {
+    if (isHelpFlag(argv[i])) flag = true;
+    else words.push_back(argv[i]);
+  }
+  if (words.empty()) {
+    if (flag) std::fputs(findCommand("help")->help, stdout);
+    else printUsage(stdout);
+    return kExitOk;
+  }
+  if (words.size() > 1) throw UsageError(std::string("help: unexpected argument '") + words[1] + "'");
+  const Command* command = findCommand(words[0]);
+  if (!command) throw UsageError(std::string("help: unknown command '") + words[0] + "'");
+  std::fputs(command->help, stdout);
+  return kExitOk;
 }
 
 int dispatch(int argc, char** argv) {

@@ -85,7 +85,7 @@ int runScene(int argc, char** argv, int first) {
     const std::string path = scenes::runScene(n, out_dir, stdout);
     const double seconds =
         std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-    std::printf("scene %s: %s (%.2f s)\n", n.c_str(), path.c_str(), seconds);
+    std::printf("scene %s: %s (%.2f s)\n", n.c_str(), oneLine(path).c_str(), seconds);
     std::fflush(stdout);
   }
   return kExitOk;

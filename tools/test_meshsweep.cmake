@@ -464,6 +464,17 @@ foreach(json kept2.json "${long_name}")
   string(FIND "${kept}" "\"hausdorff\"" at)
   expect(output_both_written_content "NOT at EQUAL -1" "${json} holds '${kept}'")
 endforeach()
+# The same for a JSON written in place (a file with two names): its old content is kept whole
+# (found by review: it was written, then not cut, before the PLY failed).
+if(EXISTS /dev/full)
+  string(REPEAT "p" 3000 old_json)
+  file(WRITE "${WORK_DIR}/linked1.json" "${old_json}")
+  file(CREATE_LINK "${WORK_DIR}/linked1.json" "${WORK_DIR}/linked2.json")
+  check(output_in_place_kept RC 1 ARGS hausdorff quad.off quad.off --json linked1.json --colors /dev/full
+    ERR "/dev/full: write failed")
+  file(READ "${WORK_DIR}/linked2.json" kept)
+  expect(output_in_place_kept_content "kept STREQUAL old_json" "linked2.json changed")
+endif()
 file(GLOB hidden "${WORK_DIR}/.meshsweep-partial-*")
 expect(no_short_temporaries "NOT hidden" "left behind: ${hidden}")
 
@@ -474,6 +485,13 @@ expect(help_word_as_value_file "EXISTS \"${WORK_DIR}/-h\"" "closest --out -h wro
 check(empty_value RC 2 ARGS closest quad.off points.txt --out=
   ERR "meshsweep: closest: option --out needs a value, got an empty one")
 check(help_anywhere RC 0 ARGS closest --bogus --help OUT "Usage: meshsweep closest")
+check(help_help RC 0 ARGS help --help OUT "Usage: meshsweep help")
+check(help_command_flag RC 0 ARGS help closest -h OUT "Usage: meshsweep closest")
+# Another name of standard output (here a pipe) is written through the stream (found by an
+# audit: it looked for a file beside /proc/self/fd/1).
+check(out_names_stdout RC 0 ARGS closest quad.off points.txt --out /dev/stdout OUT "point,rank,distance")
+check(hausdorff_relative_overflow RC 2 ARGS hausdorff quad.off quad.off --relative 1.7e308
+  ERR "times A's diagonal is beyond the largest double")
 
 # More threads than TBB allows (the cores) are capped quietly: no "TBB Warning" on stderr.
 check(hausdorff_many_threads RC 0 ARGS hausdorff quad.off quad.off --threads 4096 --json -
