@@ -565,6 +565,11 @@ TEST_CASE("bad input: clear errors") {
   HausdorffOptions nan_relative;
   nan_relative.relative_tolerance = NAN;
   CHECK_THROWS_AS(hausdorff(sphere, sphere, nan_relative), std::invalid_argument);
+  // A relative tolerance that overflows over A's diagonal (found by an audit: an infinite one).
+  HausdorffOptions huge_relative;
+  huge_relative.relative_tolerance = 1e308;
+  CHECK_THROWS_WITH(hausdorff(sphere, sphere, huge_relative), Catch::Contains("beyond the largest double"));
+  CHECK_THROWS_WITH(hausdorffOneSided(sphere, sphere, huge_relative), Catch::Contains("beyond the largest double"));
   // A mesh of zero extent needs an absolute tolerance.
   Mesh point;
   point.positions = {Vec3(1, 1, 1)};
