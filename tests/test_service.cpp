@@ -1237,7 +1237,9 @@ TEST_CASE("batched setPositions equals one body at a time; bad batches change no
   expectUnchanged({{bodies[0].b, &moved0}, {bodies[0].b, &moved0}}, "appears twice");
   expectUnchanged({{bodies[0].b, &moved0}, {bodies[1].b, nullptr}}, "null positions");
   expectUnchanged({{bodies[0].b, &moved0}, {rigid, &moved1}}, "not deforming");
-  expectUnchanged({{bodies[0].b, &moved0}, {BodyHandle{}, &moved1}}, "stale body handle");
+  expectUnchanged({{bodies[0].b, &moved0}, {BodyHandle{}, &moved1}}, "batch entry 1 (body none): stale body handle");
+  expectUnchanged({{bodies[0].b, &moved0}, {bodies[1].a, &moved1}},
+                  "batch entry 1 (body 1): a body handle of another DistanceService");
   CHECK(batched.setPositions(std::vector<BodyPositions>{}).empty());
   CHECK(batched.setPositions({{bodies[0].b, &moved0}, {bodies[1].b, &moved1}}).size() == 2);
   CHECK(batched.positions(bodies[1].b) == moved1);
