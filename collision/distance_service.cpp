@@ -1090,23 +1090,20 @@ PositionsUpdate DistanceService::setPositions(BodyHandle body, const std::vector
 }
 
 std::vector<PositionsUpdate> DistanceService::setPositions(const std::vector<BodyPositions>& batch) {
-  auto error = [&](size_t i, const std::string& what) {
+  // "setPositions: batch entry i (body n)": the call and the entry, in front of every error.
+  auto entry = [&](size_t i) {
     const uint32_t slot = batch[i].body.index;
-    return std::invalid_argument("DistanceService::setPositions: batch entry " + std::to_string(i) + " (body " +
-                                 (slot == kInvalidIndex ? std::string("none") : std::to_string(slot)) + ")" + what);
+    return "setPositions: batch entry " + std::to_string(i) + " (body " +
+           (slot == kInvalidIndex ? std::string("none") : std::to_string(slot)) + ")";
+  };
+  auto error = [&](size_t i, const std::string& what) {
+    return std::invalid_argument("DistanceService::" + entry(i) + what);
   };
   // Every entry checked before any body changes.
   std::vector<Body*> targets(batch.size());
   std::vector<uint32_t> slots(batch.size());
   for (size_t i = 0; i < batch.size(); ++i) {
-    Body* found = nullptr;
-    try {
-      found = &impl_->body(batch[i].body, "setPositions", BodyKind::kDeforming);
-    } catch (const std::invalid_argument& e) {  // stale, another service's, not deforming
-      const std::string message = e.what(), prefix = "DistanceService::setPositions: ";
-      throw error(i, ": " + (message.rfind(prefix, 0) == 0 ? message.substr(prefix.size()) : message));
-    }
-    Body& b = *found;
+    Body& b = impl_->body(batch[i].body, entry(i).c_str(), BodyKind::kDeforming);
     if (!batch[i].positions) throw error(i, ": null positions");
     const size_t expected = b.deforming->positions().size();
     if (batch[i].positions->size() != expected)

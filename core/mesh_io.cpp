@@ -152,26 +152,11 @@ bool isHugeInteger(std::string_view word) {
 }
 
 // A word of the file, quoted for a message: its first 40 bytes, a byte that is not printable
-// ASCII written as its C escape ("\x1b", "\t"), so that the message stays one line and says
-// what the file holds.
+// ASCII written as its C escape, so that the message stays one line and says what the file
+// holds.
 std::string shown(std::string_view word) {
   constexpr std::size_t kShown = 40;
-  std::string s;
-  for (const char c : word.substr(0, kShown)) {
-    const auto byte = static_cast<unsigned char>(c);
-    if (byte >= 0x20 && byte < 0x7f) {
-      s += c;
-    } else if (byte == '\t') {
-      s += "\\t";
-    } else if (byte == '\r') {
-      s += "\\r";
-    } else {
-      char escaped[8];
-      std::snprintf(escaped, sizeof escaped, "\\x%02x", byte);
-      s += escaped;
-    }
-  }
-  return "'" + s + (word.size() > kShown ? "...'" : "'");
+  return "'" + escapedText(word.substr(0, kShown), true) + (word.size() > kShown ? "...'" : "'");
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -1715,6 +1700,29 @@ std::vector<Vec3> readPoints(const std::string& path) {
   }
   if (in.bad() || (from_stdin && std::ferror(stdin))) throw MeshError(name + ": " + readError());
   return points;
+}
+
+std::string escapedText(std::string_view text, bool escape_non_ascii) {
+  std::string out;
+  out.reserve(text.size());
+  for (const char c : text) {
+    const auto byte = static_cast<unsigned char>(c);
+    if (byte >= 0x20 && byte != 0x7f && (byte < 0x80 || !escape_non_ascii)) {
+      out += c;
+      continue;
+    }
+    switch (byte) {
+      case '\n': out += "\\n"; break;
+      case '\r': out += "\\r"; break;
+      case '\t': out += "\\t"; break;
+      default: {
+        char escaped[8];
+        std::snprintf(escaped, sizeof escaped, "\\x%02x", byte);
+        out += escaped;
+      }
+    }
+  }
+  return out;
 }
 
 }  // namespace meshsweeper

@@ -5,6 +5,7 @@
 #include "core/mesh.h"
 
 #include <string>
+#include <string_view>
 #include <vector>
 
 namespace meshsweeper {
@@ -32,5 +33,10 @@ void writeOff(const Mesh& mesh, const std::string& path);
 // path "-" reads standard input. Throws MeshError ("PATH:LINE: problem") on malformed lines or
 // non-finite values.
 std::vector<Vec3> readPoints(const std::string& path);
+
+// `text` made fit for a one-line message: a control byte (below 0x20, and 0x7f) written as its
+// C escape ("\n", "\r", "\t", "\x1b"), and with `escape_non_ascii` every byte past 0x7e too (a
+// file's garbage; without it UTF-8 stays as it is); a backslash as it is.
+std::string escapedText(std::string_view text, bool escape_non_ascii);
 
 }  // namespace meshsweeper

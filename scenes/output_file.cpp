@@ -83,6 +83,24 @@ void unregisterTemporary(const std::string& path) {
       g_temporary_state[i].store(0, std::memory_order_release);
 }
 
+// Whether a rename could not replace the existing file `target`: in a sticky directory (/tmp)
+// only the owner of the file or of the directory may (found by an audit: a writable file of
+// another user there failed at the end, after the long work).
+bool sticky(const std::string& target, const struct stat& file) {
+  const uid_t me = ::geteuid();
+  if (me == 0 || file.st_uid == me) return false;
+  struct stat dir {};
+  const std::string parent = std::filesystem::path(target).parent_path().string();
+  return ::stat(parent.c_str(), &dir) == 0 && (dir.st_mode & S_ISVTX) && dir.st_uid != me;
+}
+
+// Cuts a regular file written in place to nothing, once, before its first byte.
+bool cutIfPending(OpenOutput& out) {
+  if (!out.cut_pending) return true;
+  out.cut_pending = false;
+  return std::fflush(out.file) == 0 && ::ftruncate(::fileno(out.file), 0) == 0;
+}
+
 }  // namespace
 
 std::filesystem::path outputDestination(const std::string& name) {
@@ -102,19 +120,6 @@ std::filesystem::path outputDestination(const std::string& name) {
   const fs::path canonical = fs::weakly_canonical(path, error);
   return error ? path.lexically_normal() : canonical;
 }
-
-namespace {
-// Whether a rename could not replace the existing file `target`: in a sticky directory (/tmp)
-// only the owner of the file or of the directory may (found by an audit: a writable file of
-// another user there failed at the end, after the long work).
-bool sticky(const std::string& target, const struct stat& file) {
-  const uid_t me = ::geteuid();
-  if (me == 0 || file.st_uid == me) return false;
-  struct stat dir {};
-  const std::string parent = std::filesystem::path(target).parent_path().string();
-  return ::stat(parent.c_str(), &dir) == 0 && (dir.st_mode & S_ISVTX) && dir.st_uid != me;
-}
-}  // namespace
 
 int openOutput(const std::string& path, OpenOutput& out) {
   out = OpenOutput();
@@ -178,15 +183,6 @@ int openOutput(const std::string& path, OpenOutput& out) {
   out.cut_pending = ::fstat(fd, &opened) == 0 && S_ISREG(opened.st_mode);
   return 0;
 }
-
-namespace {
-// Cuts a regular file written in place to nothing, once, before its first byte.
-bool cutIfPending(OpenOutput& out) {
-  if (!out.cut_pending) return true;
-  out.cut_pending = false;
-  return std::fflush(out.file) == 0 && ::ftruncate(::fileno(out.file), 0) == 0;
-}
-}  // namespace
 
 bool writeOutput(OpenOutput& out, const void* data, size_t size) {
   if (size == 0) return true;

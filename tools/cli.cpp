@@ -1,5 +1,7 @@
 #include "tools/cli.h"
 
+#include "core/mesh_io.h"
+
 #include <cctype>
 #include <cerrno>
 #include <cmath>
@@ -237,26 +239,6 @@ std::string jsonString(const std::string& text) {
   return out + "\"";
 }
 
-std::string oneLine(const std::string& text) {
-  std::string out;
-  out.reserve(text.size());
-  for (unsigned char c : text) {
-    if (c >= 0x20 && c != 0x7f) {
-      out += static_cast<char>(c);
-      continue;
-    }
-    switch (c) {
-      case '\n': out += "\\n"; break;
-      case '\r': out += "\\r"; break;
-      case '\t': out += "\\t"; break;
-      default: {
-        char escaped[8];
-        std::snprintf(escaped, sizeof escaped, "\\x%02x", c);
-        out += escaped;
-      }
-    }
-  }
-  return out;
-}
+std::string oneLine(const std::string& text) { return escapedText(text, false); }
 
 }  // namespace meshsweeper::cli

@@ -151,7 +151,8 @@ class Timer {
 std::string jsonString(const std::string& text);
 
 // An error message on one line: its control characters (a line break in a file's name, say)
-// written as C escapes ("\n", "\r", "\t", "\x1b"), a backslash as it is.
+// written as C escapes ("\n", "\r", "\t", "\x1b"), a backslash as it is (escapedText,
+// core/mesh_io.h, keeping UTF-8).
 std::string oneLine(const std::string& text);
 
 }  // namespace meshsweeper::cli
