@@ -241,7 +241,10 @@ struct DistanceService::Impl {
            bodies[h.index].generation == h.generation;
   }
   Body& body(BodyHandle h, const char* what) {
-    if (h.service != number && h.service != 0)
+    if (h.service == 0)
+      throw std::invalid_argument(std::string("DistanceService::") + what +
+                                  ": a body handle that no DistanceService made (default-constructed or built by hand)");
+    if (h.service != number)
       throw std::invalid_argument(std::string("DistanceService::") + what +
                                   ": a body handle of another DistanceService (slot " + std::to_string(h.index) + ")");
     if (!holds(h))

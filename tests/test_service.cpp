@@ -1237,7 +1237,8 @@ TEST_CASE("batched setPositions equals one body at a time; bad batches change no
   expectUnchanged({{bodies[0].b, &moved0}, {bodies[0].b, &moved0}}, "appears twice");
   expectUnchanged({{bodies[0].b, &moved0}, {bodies[1].b, nullptr}}, "null positions");
   expectUnchanged({{bodies[0].b, &moved0}, {rigid, &moved1}}, "not deforming");
-  expectUnchanged({{bodies[0].b, &moved0}, {BodyHandle{}, &moved1}}, "batch entry 1 (body none): stale body handle");
+  expectUnchanged({{bodies[0].b, &moved0}, {BodyHandle{}, &moved1}},
+                  "batch entry 1 (body none): a body handle that no DistanceService made");
   expectUnchanged({{bodies[0].b, &moved0}, {bodies[1].a, &moved1}},
                   "batch entry 1 (body 1): a body handle of another DistanceService");
   CHECK(batched.setPositions(std::vector<BodyPositions>{}).empty());
@@ -1297,9 +1298,13 @@ TEST_CASE("bad input: NaN points, stale handles, wrong sizes, wrong kinds", "[se
     CHECK_THROWS_WITH(service.setPositions(deforming, sphere.positions), Catch::Contains("stale body handle"));
     CHECK_THROWS_WITH(service.remove(deforming), Catch::Contains("stale body handle"));
     CHECK_THROWS_WITH(service.kind(deforming), Catch::Contains("stale body handle"));
-    CHECK_THROWS_WITH(service.shape(BodyHandle{}), Catch::Contains("stale body handle"));
+    // A default-constructed or hand-built handle (service 0) is named as such, not as stale.
+    CHECK_THROWS_WITH(service.shape(BodyHandle{}), Catch::Contains("a body handle that no DistanceService made"));
     CHECK_THROWS_WITH(service.setPose(BodyHandle{99, 1}, Eigen::Isometry3d::Identity()),
-                      Catch::Contains("stale body handle"));
+                      Catch::Contains("no DistanceService made"));
+    CHECK_THROWS_WITH(service.setPose(BodyHandle{rigid.index, rigid.generation}, Eigen::Isometry3d::Identity()),
+                      Catch::Contains("no DistanceService made"));
+    CHECK_FALSE(service.contains(BodyHandle{rigid.index, rigid.generation}));
     // The slot is reused with a new generation: the old handle stays stale.
     const BodyHandle again = service.addDeforming(hierarchy, 0.05);
     CHECK(again.index == deforming.index);
