@@ -202,6 +202,41 @@ size_t Broadphase::candidatesInTree(const Vec3& p, double limit, uint32_t* out) 
   return n;
 }
 
+double Broadphase::nearestFar(const Vec3& p) const {
+  const double px = p.x(), py = p.y(), pz = p.z();
+  // Squared distance to the farthest corner of box k (+inf for a hole or padding).
+  auto far2 = [&](uint32_t k) {
+    const double fx = std::max(std::abs(px - lower_[0][k]), std::abs(px - upper_[0][k]));
+    const double fy = std::max(std::abs(py - lower_[1][k]), std::abs(py - upper_[1][k]));
+    const double fz = std::max(std::abs(pz - lower_[2][k]), std::abs(pz - upper_[2][k]));
+    return lower_[0][k] <= upper_[0][k] ? (fx * fx + fy * fy) + fz * fz : kInf;
+  };
+  double best2 = kInf;
+  if (!tree_ready_) {
+    for (uint32_t k = 0; k < slot_of_.size(); ++k) best2 = std::min(best2, far2(k));
+    return std::sqrt(best2);
+  }
+  auto gap2 = [&](const TreeNode& n) {
+    return squaredGap(n.lower[0], n.lower[1], n.lower[2], n.upper[0], n.upper[1], n.upper[2], px, py, pz);
+  };
+  // A node's boxes are no nearer than the node's box: one whose gap is past the best is skipped.
+  uint32_t stack[64];
+  int top = 0;
+  stack[top++] = 0;
+  while (top > 0) {
+    const TreeNode& node = tree_[stack[--top]];
+    if (!(gap2(node) < best2)) continue;
+    if (node.count > 0) {
+      for (uint32_t i = node.first; i < node.first + node.count; ++i) best2 = std::min(best2, far2(order_[i]));
+      continue;
+    }
+    const bool left_first = gap2(tree_[node.left]) <= gap2(tree_[node.right]);
+    stack[top++] = left_first ? node.right : node.left;  // the nearer child is popped first
+    stack[top++] = left_first ? node.left : node.right;
+  }
+  return std::sqrt(best2);
+}
+
 size_t Broadphase::candidates(const Vec3& p, double distance, uint32_t* out) const {
   const double limit = squaredLimit(distance);
   if (tree_ready_) return candidatesInTree(p, limit, out);

@@ -56,6 +56,11 @@ class Broadphase {
   // liveCount() entries. Preconditions: p finite; distance >= 0. Safe to call from several
   // threads at once (between calls of set() and prepare()).
   size_t candidates(const Vec3& p, double distance, uint32_t* out) const;
+  // The least distance from p to the farthest point of a box (+infinity when no slot holds
+  // one): every box holds its body's surface, so each body has a point within that distance of
+  // p, and the closest body of p is within it. Through the tree when it is ready (a descent,
+  // nearest nodes first), else a loop over every box. Precondition: p finite.
+  double nearestFar(const Vec3& p) const;
   // Builds the tree over the boxes when more than kTreeBodies slots hold one and a box changed
   // since; else nothing. Call it after the boxes of a step are set, before candidates() (which
   // loops over every box while no tree is ready).

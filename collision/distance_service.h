@@ -228,10 +228,12 @@ class DistanceService {
 
   // ---- Shared tables ---------------------------------------------------------------------
   // The hierarchy of `mesh`, built on first use and cached by the mesh's address: later calls
-  // with the same, unchanged Mesh object return the same shared hierarchy. Each call compares
-  // the mesh with the hierarchy's copy (one pass over it, far cheaper than a build), so a mesh
-  // changed in place, or another mesh at the same address, gets a new hierarchy. forgetMesh()
-  // drops an entry. Throws MeshError for an invalid mesh.
+  // with the same, unchanged Mesh object return the same shared hierarchy while a body or the
+  // caller still holds it (the cache holds it weakly: a hierarchy nothing holds is freed, and
+  // built again by the next call). Each call compares the mesh with the hierarchy's copy (one
+  // pass over it, far cheaper than a build), so a mesh changed in place, or another mesh at the
+  // same address, gets a new hierarchy. forgetMesh() drops an entry. Throws MeshError for an
+  // invalid mesh.
   std::shared_ptr<const Hierarchy> hierarchyFor(const Mesh& mesh);
   void forgetMesh(const Mesh& mesh);
   // The shared per-mesh tables the service uses for `hierarchy` (built once per hierarchy and
@@ -327,6 +329,11 @@ class DistanceService {
   // (capacity; a removed body's states until the next step).
   size_t coherentStates() const;
   size_t coherentStateBytes() const;
+  // Bytes of scratch the service keeps for the threads of its arena between steps (per thread:
+  // a query stream per body it queried, candidate lists, buffers): bounded by the arena's
+  // threads whatever threads called step(), and a step that needed much more (a within step at
+  // a large distance) leaves no more than a usual step's.
+  size_t scratchBytes() const;
   // Drops every coherent state (the next step starts cold).
   void clearCoherentStates();
 

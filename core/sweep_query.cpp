@@ -255,6 +255,17 @@ QueryStream::QueryStream(std::shared_ptr<const Hierarchy> hierarchy, CoherenceOp
   heap_.reserve(64);
 }
 
+void QueryStream::trimScratch(size_t entries) {
+  auto trim = [entries](auto& buffer) {
+    if (buffer.capacity() > entries) std::remove_reference_t<decltype(buffer)>().swap(buffer);
+  };
+  trim(stack_);
+  trim(heap_);
+  trim(gathered_);
+  trim(within_keys_);
+  trim(within_hits_);
+}
+
 size_t QueryStream::stateBytes() const {
   return sizeof(*this) + stack_.capacity() * sizeof(StackEntry) + heap_.capacity() * sizeof(FrontEntry) +
          set_faces_.capacity() * sizeof(TriangleIndex) + set_blocks_.capacity() * sizeof(TriangleBlock8) +

@@ -207,6 +207,11 @@ class QueryStream {
   // Bytes of changing state this stream holds (its object and the capacity of its buffers):
   // the per-stream memory, nothing per vertex of the mesh.
   size_t stateBytes() const;
+  // Frees the per-query buffers (search stack and heap, gathered faces, a within query's hits)
+  // whose capacity exceeds `entries`: one query over many faces (within a large distance)
+  // leaves them at their largest, and a stream kept for later would hold that memory. Answers
+  // and coherent state are unchanged; the next such query allocates again.
+  void trimScratch(size_t entries = 4096);
 
  private:
   struct FrontEntry {

@@ -29,6 +29,7 @@
 #include <tbb/global_control.h>
 
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <cstring>
 #include <filesystem>
@@ -37,9 +38,11 @@
 #include <map>
 #include <numeric>
 #include <memory>
+#include <mutex>
 #include <sstream>
 #include <stdexcept>
 #include <string>
+#include <thread>
 #include <vector>
 
 using namespace meshsweeper;
@@ -468,6 +471,59 @@ TEST_CASE("closest mode with an unlimited distance queries only the bodies that 
     // A point reaches a few bodies (7.4 on average here), not all 37.
     CHECK(r1.stats().pairs < 12 * points.size());
     CHECK(twin.one.coherentStates() == r1.stats().pairs);
+  }
+}
+
+// Hundreds of bodies (past Broadphase::kTreeBodies, so the broadphase descends its tree):
+// closest mode at an unlimited distance first bounds the closest hit by the nearest box's
+// farthest point, and within mode merges the sorted hits of many bodies per point; both equal
+// brute force and give the same results on 1 and 2 threads (found by an audit: both cost time
+// in proportion to every body a point could reach, and within mode its square).
+TEST_CASE("hundreds of bodies: unlimited closest and within over many bodies equal brute force", "[service]") {
+  Twin twin;
+  const Mesh ball = scenes::icosphere(0, 0.25);
+  Mesh tet;
+  tet.positions = {Vec3(0, 0, 0), Vec3(0.4, 0, 0), Vec3(0, 0.4, 0), Vec3(0, 0, 0.4)};
+  tet.triangles = {Triangle{0, 2, 1}, Triangle{0, 1, 3}, Triangle{0, 3, 2}, Triangle{1, 2, 3}};
+  const auto hb = twin.one.hierarchyFor(ball), ht = twin.one.hierarchyFor(tet);
+  Random random(41);
+  for (int i = 0; i < 18; ++i)
+    for (int j = 0; j < 18; ++j) {
+      const Vec3 at(0.7 * i, 0.7 * j, 0.3 * random.uniform());
+      if ((i + j) % 5 == 0) {
+        twin.addKeyframed(hb, {transformed(ball.positions, makePose(0, Vec3::UnitZ(), at))});
+      } else {
+        twin.addRigid((i * j) % 2 ? hb : ht, makePose(random.uniform() * 3, Vec3(1, 2, 3), at));
+      }
+    }
+  REQUIRE(twin.one.bodyCount() > Broadphase::kTreeBodies);
+  std::vector<Vec3> points;
+  for (int i = 0; i < 150; ++i) points.push_back(random.inBox(Vec3(-1, -1, -1), Vec3(13, 13, 1.5)));
+  for (int i = 0; i < 10; ++i) points.push_back(random.inBox(Vec3(-60, -60, -60), Vec3(60, 60, 60)));
+  Failures closest("closest over hundreds of bodies"), within("within over many bodies"), identical("1 vs 2 threads");
+  for (int step = 0; step < 2; ++step) {
+    for (Vec3& p : points) p += Vec3(0.02, -0.01, 0.005);
+    for (const double d : {kInf, 0.5}) {
+      const StepResult r1 = twin.one.step(toMatrix(points), d);
+      const StepResult r2 = twin.two.step(toMatrix(points), d);
+      checkStep(twin, points, d, QueryMode::kClosest, r1, closest);
+      checkIdentical(r1, r2, identical);
+      if (d == kInf) CHECK(r1.stats().pairs < 16 * points.size());  // the few bodies that can be closest, of 324
+    }
+    // Within 1.6 a point near the grid reaches about 20 bodies: many sorted runs to merge.
+    const std::vector<Vec3> some(points.begin(), points.begin() + 40);
+    const StepResult w1 = twin.one.step(toMatrix(some), 1.6, QueryMode::kWithin);
+    const StepResult w2 = twin.two.step(toMatrix(some), 1.6, QueryMode::kWithin);
+    checkStep(twin, some, 1.6, QueryMode::kWithin, w1, within);
+    checkIdentical(w1, w2, identical);
+    size_t bodies_reached = 0;
+    for (size_t i = 0; i < some.size(); ++i) {
+      std::vector<uint32_t> seen;
+      for (const DistanceHit& h : w1.hits(i)) seen.push_back(h.body.index);
+      std::sort(seen.begin(), seen.end());
+      bodies_reached = std::max<size_t>(bodies_reached, std::unique(seen.begin(), seen.end()) - seen.begin());
+    }
+    CHECK(bodies_reached >= 9);
   }
 }
 
@@ -1069,6 +1125,14 @@ TEST_CASE("broadphase equals its reference", "[service][broadphase]") {
           REQUIRE(nf == nr);
           for (size_t k = 0; k < nf; ++k) REQUIRE(out_flat[k] == out_ref[k]);
         }
+        // The nearest box's farthest point (flat loop, or the tree after prepare()).
+        double nearest_far = kInf;
+        for (const Box3& box : reference.boxes)
+          if (!box.empty())
+            nearest_far = std::min(nearest_far, (p - box.lower).cwiseAbs().cwiseMax((p - box.upper).cwiseAbs()).norm());
+        const double far = flat.nearestFar(p);
+        if (nearest_far == kInf) REQUIRE(far == kInf);
+        else REQUIRE(std::abs(far - nearest_far) <= 1e-14 * nearest_far);
       }
       size_t live = 0;
       for (size_t s = 0; s < count; ++s) {
@@ -1140,6 +1204,53 @@ TEST_CASE("coherent states stay bounded; removed bodies drop theirs", "[service]
   CHECK(service.coherentStates() == 0);
 }
 
+// Scratch between steps: one slot per thread of the service's arena, whatever threads call
+// step() (found by an audit: scratch per calling thread grew with every new thread), and a
+// within step over every face leaves no more than a usual step's (it kept megabytes per thread
+// and body).
+TEST_CASE("scratch stays bounded: calling threads and a within step over every face", "[service]") {
+  DistanceService service(ServiceOptions{2, 16});
+  const Mesh sphere = scenes::icosphere(4, 1.0);  // 5,120 faces
+  const auto hierarchy = service.hierarchyFor(sphere);
+  service.addRigid(hierarchy);
+  service.addRigid(hierarchy, makePose(0, Vec3(0, 0, 1), Vec3(2.5, 0, 0)));
+  std::vector<Vec3> points = scenes::nearSurfacePoints(sphere, 300, 0.05, 7);
+  StepResult r;
+  for (int s = 0; s < 3; ++s) service.step(toMatrix(points), 0.3, QueryMode::kClosest, r);
+  const size_t usual = service.scratchBytes();
+  CHECK(usual > 0);
+  // Every face of both bodies within the distance: 10,240 hits a point.
+  const std::vector<Vec3> few(points.begin(), points.begin() + 20);
+  service.step(toMatrix(few), kInf, QueryMode::kWithin, r);
+  REQUIRE(r.hits(0).size() == 2 * sphere.triangles.size());
+  CHECK(service.scratchBytes() <= usual + 256 * 1024);
+  // Steps called from 12 threads alive at once (one at a time): the same scratch.
+  service.step(toMatrix(points), 0.3, QueryMode::kClosest, r);
+  const size_t before = service.scratchBytes();
+  std::mutex one_at_a_time;
+  std::vector<std::thread> callers;
+  std::atomic<int> done{0};
+  for (int t = 0; t < 12; ++t)
+    callers.emplace_back([&] {
+      {
+        std::lock_guard<std::mutex> lock(one_at_a_time);
+        StepResult mine;
+        service.step(toMatrix(points), 0.3, QueryMode::kClosest, mine);
+        CHECK(mine.stats().hits == r.stats().hits);
+      }
+      ++done;
+      while (done < 12) std::this_thread::yield();  // every caller alive until all have called
+    });
+  for (std::thread& t : callers) t.join();
+  CHECK(service.scratchBytes() <= before + 8 * 1024);  // a scratch per caller: about 6 KB each
+  // The same thread count keeps its arena and scratch.
+  const unsigned threads = service.threads();
+  service.setThreads(2);
+  CHECK(service.threads() == threads);
+  CHECK(service.scratchBytes() <= before + 8 * 1024);
+  CHECK_THROWS_WITH(service.step(toMatrix(points), -1e-300), Catch::Contains("(got -1e-300)"));
+}
+
 TEST_CASE("shared tables: hierarchyFor caches by mesh, shapes shared per hierarchy", "[service]") {
   DistanceService service;
   const Mesh a = scenes::icosphere(1);
@@ -1155,6 +1266,26 @@ TEST_CASE("shared tables: hierarchyFor caches by mesh, shapes shared per hierarc
   CHECK(service.shapeFor(ha).get() == &service.shape(x));
   service.forgetMesh(a);
   CHECK(service.hierarchyFor(a) != ha);  // rebuilt after forgetMesh
+  // The cache holds a hierarchy weakly: while a body or the caller holds it (a program that
+  // made and dropped meshes kept every one's hierarchy, found by an audit).
+  std::weak_ptr<const Hierarchy> dropped;
+  {
+    const Mesh c = scenes::icosphere(2);
+    dropped = service.hierarchyFor(c);
+    CHECK(dropped.expired());  // nobody held it
+    const auto held = service.hierarchyFor(c);
+    CHECK(service.hierarchyFor(c) == held);
+    dropped = held;
+  }
+  CHECK(dropped.expired());
+  {
+    const Mesh c = scenes::icosphere(2);
+    const BodyHandle w = service.addRigid(service.hierarchyFor(c));  // the body holds it
+    CHECK(service.hierarchyFor(c) == service.shape(w).hierarchy());
+    dropped = service.shape(w).hierarchy();
+    service.remove(w);
+  }
+  CHECK(dropped.expired());
   CHECK(service.kind(x) == BodyKind::kRigid);
   CHECK(service.kind(y) == BodyKind::kDeforming);
   CHECK(service.bodies().size() == 3);
