@@ -1113,7 +1113,8 @@ HausdorffResult run(const Mesh& a, const std::shared_ptr<const Hierarchy>& a_hie
   const bool symmetric = a_hierarchy != nullptr;
   const double scale = std::max(largestCoordinate(a), largestCoordinate(b));
   HausdorffResult result;
-  result.tolerance = std::max(effectiveTolerance(options, a), 4 * kMarginRelative * scale);
+  result.requested_tolerance = effectiveTolerance(options, a);
+  result.tolerance = std::max(result.requested_tolerance, 4 * kMarginRelative * scale);
   result.build_seconds = build_seconds;
   const double tol = result.tolerance;
   const bool parallel = options.threads != 1;
@@ -1181,6 +1182,96 @@ HausdorffResult run(const Mesh& a, const std::shared_ptr<const Hierarchy>& a_hie
   return result;
 }
 
+// Hausdorff distances do not change when both meshes move by the same translation. About the
+// centre of their joint box, the coordinates (and with them the rounding margin and the least
+// tolerance, 4e-12 of the largest coordinate) measure the meshes' own extent, not how far they
+// lie from the origin: the bundled elephant moved by 1e9 had its tolerance raised from 1.4e-4
+// to 4e-3 in place (found by an audit). The meshes are moved only where that shrinks the
+// coordinates at least fourfold, so meshes placed about the origin are computed as given.
+// Each translated coordinate's rounding error is measured exactly (Knuth's two-sum; it is 0
+// where a coordinate and the centre are within a factor of two, Sterbenz); a vertex moved off
+// its exact translate by e moves every point of its faces by at most e, so both one-sided
+// distances change by at most the largest e of A plus that of B, by which the bounds widen.
+struct Centred {
+  Mesh a, b;                  // the translated copies (when moved)
+  Vec3 shift = Vec3::Zero();  // a point of the copies plus shift is the original point
+  double error = 0;           // bound on how far the copies' faces lie from the exact translates
+  bool moved = false;
+};
+
+void jointBox(const Mesh& mesh, Vec3& lower, Vec3& upper) {
+  for (const Triangle& t : mesh.triangles)
+    for (VertexIndex v : t) {
+      lower = lower.cwiseMin(mesh.positions[v]);
+      upper = upper.cwiseMax(mesh.positions[v]);
+    }
+}
+
+// The copy of `mesh` moved by -shift; returns the largest rounding error of a used vertex.
+double translated(const Mesh& mesh, const Vec3& shift, Mesh& out) {
+  out.name = mesh.name;
+  out.triangles = mesh.triangles;
+  out.positions.resize(mesh.positions.size());
+  std::vector<double> error(mesh.positions.size(), 0.0);
+  for (size_t v = 0; v < mesh.positions.size(); ++v) {
+    double e2 = 0;
+    for (int axis = 0; axis < 3; ++axis) {
+      const double x = mesh.positions[v][axis], y = -shift[axis];
+      const double sum = x + y, back = sum - x;
+      const double e = (x - (sum - back)) + (y - back);  // x + y = sum + e exactly
+      out.positions[v][axis] = sum;
+      e2 += e * e;
+    }
+    error[v] = e2;
+  }
+  double worst2 = 0;
+  for (const Triangle& t : mesh.triangles)
+    for (VertexIndex v : t) worst2 = std::max(worst2, error[v]);
+  return worst2 > 0 ? std::sqrt(worst2) * (1 + 4 * kEps) : 0.0;
+}
+
+Centred centred(const Mesh& a, const Mesh* b) {
+  Centred c;
+  Vec3 lower = Vec3::Constant(kInf), upper = Vec3::Constant(-kInf);
+  jointBox(a, lower, upper);
+  if (b) jointBox(*b, lower, upper);
+  const Vec3 centre = 0.5 * lower + 0.5 * upper;
+  const double now = lower.cwiseAbs().cwiseMax(upper.cwiseAbs()).maxCoeff();
+  const double then = (upper - lower).maxCoeff() / 2;
+  if (!(4 * then < now)) return c;
+  c.moved = true;
+  c.shift = centre;
+  c.error = translated(a, centre, c.a);
+  if (b) c.error += translated(*b, centre, c.b);
+  return c;
+}
+
+// The tolerance to ask of the centred computation, whose bounds then widen by 2 * error.
+HausdorffOptions centredOptions(const HausdorffOptions& options, const Mesh& a, const Centred& c) {
+  HausdorffOptions inner = options;
+  const double tolerance = effectiveTolerance(options, a);
+  inner.tolerance = tolerance - 2 * c.error > 0 ? tolerance - 2 * c.error : tolerance;
+  return inner;
+}
+
+// Back to the original coordinates: witnesses shifted, bounds widened by the copies' error.
+void uncentre(HausdorffResult& r, const Centred& c, bool symmetric) {
+  for (OneSidedHausdorff* h : {&r.a_to_b, &r.b_to_a}) {
+    if (h == &r.b_to_a && !symmetric) continue;
+    h->at += c.shift;
+    h->closest += c.shift;
+    if (c.error > 0) {
+      h->lower = std::max(0.0, h->lower - c.error);
+      h->upper += c.error;
+    }
+  }
+  if (c.error > 0) {
+    r.lower = std::max(0.0, r.lower - c.error);
+    r.upper += c.error;
+    r.tolerance += 2 * c.error;
+  }
+}
+
 }  // namespace
 
 HausdorffResult hausdorff(const std::shared_ptr<const Hierarchy>& a,
@@ -1195,12 +1286,19 @@ HausdorffResult hausdorff(const Mesh& a, const Mesh& b, const HausdorffOptions& 
   checkOrThrow(a);
   checkOrThrow(b);
   effectiveTolerance(options, a);  // fail before building
+  const Centred c = centred(a, &b);
+  const Mesh& ca = c.moved ? c.a : a;
+  const Mesh& cb = c.moved ? c.b : b;
   std::shared_ptr<const Hierarchy> ha, hb;
   tbb::task_arena arena(arenaConcurrency(options.threads));
   arena.execute([&] {
-    tbb::parallel_invoke([&] { ha = Hierarchy::build(a); }, [&] { hb = Hierarchy::build(b); });
+    tbb::parallel_invoke([&] { ha = Hierarchy::build(ca); }, [&] { hb = Hierarchy::build(cb); });
   });
-  return run(ha->mesh(), ha, hb, options, start, secondsSince(start));
+  if (!c.moved) return run(ha->mesh(), ha, hb, options, start, secondsSince(start));
+  HausdorffResult r = run(ha->mesh(), ha, hb, centredOptions(options, a, c), start, secondsSince(start));
+  r.requested_tolerance = effectiveTolerance(options, a);
+  uncentre(r, c, true);
+  return r;
 }
 
 HausdorffResult hausdorffOneSided(const Mesh& a, const std::shared_ptr<const Hierarchy>& b,
@@ -1215,8 +1313,13 @@ HausdorffResult hausdorffOneSided(const Mesh& a, const Mesh& b, const HausdorffO
   checkOrThrow(a);
   checkOrThrow(b);
   effectiveTolerance(options, a);
-  const std::shared_ptr<const Hierarchy> hb = Hierarchy::build(b);
-  return run(a, nullptr, hb, options, start, secondsSince(start));
+  const Centred c = centred(a, &b);
+  if (!c.moved) return run(a, nullptr, Hierarchy::build(b), options, start, secondsSince(start));
+  const std::shared_ptr<const Hierarchy> hb = Hierarchy::build(c.b);
+  HausdorffResult r = run(c.a, nullptr, hb, centredOptions(options, a, c), start, secondsSince(start));
+  r.requested_tolerance = effectiveTolerance(options, a);
+  uncentre(r, c, false);
+  return r;
 }
 
 }  // namespace meshsweeper

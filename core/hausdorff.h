@@ -31,9 +31,15 @@
 //    that is proven, so its own [lower, upper] may be wider than the tolerance (set
 //    HausdorffOptions::tighten_both to refine both to the tolerance);
 //  - bounds are exact up to double rounding: every upper bound carries a margin of 1e-12 times
-//    the largest coordinate magnitude, which also limits how small a tolerance can be; a lower
-//    bound is the computed distance of a point of A, which can exceed the true one by that
-//    rounding (identical meshes give about 3e-17 at coordinates near 1, not 0);
+//    the largest coordinate magnitude, which also limits how small a tolerance can be (4e-12
+//    times it: HausdorffResult::tolerance, with requested_tolerance beside it); a lower bound
+//    is the computed distance of a point of A, which can exceed the true one by that rounding
+//    (identical meshes give about 3e-17 at coordinates near 1, not 0). The Mesh entry points
+//    compute about the centre of the meshes' joint box when that shrinks the coordinates at
+//    least fourfold (a translation changes no distance; witnesses are reported in the given
+//    coordinates, bounds widened by the translation's rounding, if any), so meshes far from
+//    the origin get the margin of their own size; the Hierarchy entry points compute in the
+//    hierarchies' coordinates;
 //  - surfaces that coincide but are triangulated differently are split along the other's edges
 //    down to the tolerance (a point there is covered by no single face of B): cells, time and
 //    memory grow as 1 / tolerance (cube-meshed against cube: 5 s at 1e-5, 44 s and 2.3 GB at
@@ -110,8 +116,12 @@ struct HausdorffResult {
   OneSidedHausdorff a_to_b;     // h(A, B)
   OneSidedHausdorff b_to_a;     // h(B, A); left empty (NaN bounds) by hausdorffOneSided()
   double lower = 0, upper = 0;  // certified bounds of H(A, B) (of h(A, B) for one-sided)
-  double tolerance = 0;         // the absolute tolerance used (at least 4e-12 times the
-                                // largest coordinate magnitude: the rounding margin)
+  double tolerance = 0;         // the absolute tolerance used: the requested one, raised to
+                                // 4e-12 times the largest coordinate magnitude (the rounding
+                                // margin; the Mesh entry points measure coordinates from the
+                                // centre of the meshes' joint box, see Limits)
+  double requested_tolerance = 0;  // the tolerance asked for (absolute, or relative times A's
+                                   // diagonal); below `tolerance` where it was raised
   bool converged = true;        // upper - lower <= tolerance (false only if refinement hit its
                                 // depth limit: sub-triangles below rounding size)
   HausdorffCounters counters;   // both directions summed

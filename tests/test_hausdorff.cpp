@@ -436,6 +436,50 @@ TEST_CASE("a square translated along its normal: the translation both ways") {
   }
 }
 
+// Found by an audit: far from the origin the tolerance was raised to 4e-12 of the coordinates
+// (the bundled elephant moved by 1e9: 4e-3 instead of the 1.4e-4 asked for), still
+// "converged". The Mesh entry points compute about the centre of the meshes' joint box: the
+// tolerance asked for holds, the bounds bracket the exact distance (also where the translation
+// rounds: y - 0.3 below), and the witnesses are points of the given meshes. The Hierarchy entry
+// points compute in place and say that they raised the tolerance.
+TEST_CASE("meshes far from the origin: the tolerance asked for, witnesses in place") {
+  const Mesh square = scenes::gridPlane(6, 2.0);  // z = 0
+  for (const Vec3& far : {Vec3(1e9 + 0.1, 0.3, -0.7), Vec3(-3e12, 5e11, 7.25), Vec3(1e15, 1e15, 1e15)}) {
+    INFO("far " << far.transpose());
+    const Mesh a = translated(square, far);
+    Mesh b = a;
+    for (Vec3& p : b.positions) p.z() += 0.37;
+    // Every vertex of A sits at one height and moved by the same rounded step: B is A moved
+    // along its normal by exactly that step, which is both one-sided distances.
+    const double step = b.positions[0].z() - a.positions[0].z();
+    for (size_t v = 0; v < a.positions.size(); ++v) REQUIRE(b.positions[v].z() - a.positions[v].z() == step);
+    const double tolerance = 1e-6;
+    const HausdorffResult both = hausdorff(a, b, absolute(tolerance));
+    const HausdorffResult one = hausdorffOneSided(a, b, absolute(tolerance));
+    for (const HausdorffResult* r : {&both, &one}) {
+      CHECK(r->requested_tolerance == tolerance);
+      CHECK(r->tolerance <= tolerance * (1 + 1e-12));
+      CHECK(r->converged);
+      CHECK(r->lower <= step);
+      CHECK(r->upper >= step);
+      CHECK(r->upper - r->lower <= r->tolerance);
+      const OneSidedHausdorff& h = r->a_to_b;
+      const double slack = 4 * std::numeric_limits<double>::epsilon() * far.cwiseAbs().maxCoeff();
+      CHECK(std::abs(h.at.z() - a.positions[0].z()) <= slack);
+      CHECK(std::abs(h.closest.z() - b.positions[0].z()) <= slack);
+      CHECK((h.at - far).cwiseAbs().maxCoeff() <= 1 + slack);
+    }
+    CHECK(both.b_to_a.lower <= step);
+    CHECK(both.b_to_a.upper >= step);
+    // In place: the floor of coordinates this far, reported as raised.
+    const HausdorffResult in_place = hausdorff(Hierarchy::build(a), Hierarchy::build(b), absolute(tolerance));
+    CHECK(in_place.requested_tolerance == tolerance);
+    CHECK(in_place.tolerance == Approx(4e-12 * far.cwiseAbs().maxCoeff() + 4e-12).epsilon(0.01));
+    CHECK(in_place.lower <= step);
+    CHECK(in_place.upper >= step);
+  }
+}
+
 TEST_CASE("relative tolerance, degenerate triangles and several components") {
   const Mesh a = scenes::concatenate({scenes::icosphere(2), scenes::degenerateMesh()});
   const Mesh b = scenes::concatenate({translated(scenes::icosphere(1, 1.1), Vec3(0.05, 0, 0)),

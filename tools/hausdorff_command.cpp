@@ -45,17 +45,28 @@ const char kHausdorffHelp[] =
     "                   the summary then goes to standard error)\n"
     "  --colors FILE    write A as an ASCII PLY (double coordinates) with per-vertex 'quality'\n"
     "                   (distance to B) and red/green/blue on a blue (0) to red (largest vertex\n"
-    "                   distance) ramp; '-' as for --json; not to the destination of --json\n"
+    "                   distance) ramp (a vertex no triangle uses: quality -1, grey); '-' as\n"
+    "                   for --json; not to the destination of --json\n"
     "\n"
     "JSON keys: a, b {path, vertices, triangles, diagonal, area}; a_to_b, b_to_a {lower, upper,\n"
     "at [x,y,z], at_triangle, closest [x,y,z], closest_triangle, mean, rms, samples, queries,\n"
-    "triangles_refined, cells}; hausdorff {lower, upper}; tolerance; converged; threads;\n"
-    "seconds; build_seconds; samples; queries; triangles_refined.\n"
+    "triangles_refined, cells}; hausdorff {lower, upper}; tolerance (used); requested_tolerance;\n"
+    "converged; threads; seconds; build_seconds; samples; queries; triangles_refined.\n"
+    "The tolerance used is the one asked for, raised where it is below the rounding floor (4e-12\n"
+    "of the largest coordinate, measured from the centre of the meshes' joint box); the summary\n"
+    "then says so.\n"
     "\n"
     "Exit status: 0 success, 1 unreadable/invalid/empty mesh or unwritable output,\n"
     "2 bad command line.\n";
 
 namespace {
+
+// ")" or, for a number whose digits are not all zero that parsed as 0 (1e-400), ", which
+// rounds to 0)": the end of a "must be > 0 (got TEXT" message.
+std::string roundsToZero(const std::string& text) {
+  const std::string mantissa = text.substr(0, text.find_first_of("eE"));
+  return mantissa.find_first_of("123456789") != std::string::npos ? ", which rounds to 0)" : ")";
+}
 
 double percent(double value, double diagonal) { return diagonal > 0 ? 100 * value / diagonal : 0; }
 
@@ -84,7 +95,9 @@ std::string percentEstimate(double value, double diagonal) {
   const double p = percent(value, diagonal);
   if (!std::isfinite(p) && std::isfinite(value)) return hugePercent(value, diagonal, 0);
   char text[64];
-  std::snprintf(text, sizeof text, std::fabs(p) < 1e6 ? "%.5f" : "%.7g", p);
+  // Below 0.001% in exponent form (5 decimals printed 1.4e-6% as 0.00000%).
+  const bool fixed = std::fabs(p) < 1e6 && (p == 0 || std::fabs(p) >= 1e-3);
+  std::snprintf(text, sizeof text, fixed ? "%.5f" : "%.7g", p);
   return text;
 }
 
@@ -154,9 +167,12 @@ void writeColors(Output& out, const Mesh& mesh, const std::vector<double>& dista
   out.printf("element face %zu\nproperty list uchar int vertex_indices\nend_header\n",
              mesh.triangles.size());
   for (size_t v = 0; v < mesh.positions.size(); ++v) {
-    const double d = std::isfinite(distance[v]) ? distance[v] : 0.0;  // unused vertices: 0
-    int rgb[3];
-    ramp(largest > 0 ? d / largest : 0.0, rgb);
+    // A vertex no triangle uses has no distance: quality -1 and grey (it was written as 0 and
+    // blue, as if it touched B; found by an audit).
+    const bool used = std::isfinite(distance[v]);
+    const double d = used ? distance[v] : -1.0;
+    int rgb[3] = {128, 128, 128};
+    if (used) ramp(largest > 0 ? d / largest : 0.0, rgb);
     const Vec3& p = mesh.positions[v];
     out.printf("%.17g %.17g %.17g %.17g %d %d %d\n", p.x(), p.y(), p.z(), d, rgb[0], rgb[1], rgb[2]);
   }
@@ -202,11 +218,15 @@ int runHausdorff(int argc, char** argv, int first) {
     throw UsageError("hausdorff: --tolerance and --relative cannot be combined");
   if (args.has("--tolerance")) {
     options.tolerance = args.nonNegativeDouble("--tolerance");
-    if (!(options.tolerance > 0)) throw UsageError("hausdorff: --tolerance must be > 0");
+    if (!(options.tolerance > 0))
+      throw UsageError("hausdorff: --tolerance must be > 0 (got " + args.value("--tolerance") +
+                       roundsToZero(args.value("--tolerance")));
   }
   if (args.has("--relative")) {
     options.relative_tolerance = args.nonNegativeDouble("--relative");
-    if (!(options.relative_tolerance > 0)) throw UsageError("hausdorff: --relative must be > 0");
+    if (!(options.relative_tolerance > 0))
+      throw UsageError("hausdorff: --relative must be > 0 (got " + args.value("--relative") +
+                       roundsToZero(args.value("--relative")));
   }
   if (args.has("--threads"))
     options.threads = static_cast<unsigned>(args.integer("--threads", 0, 4096));
@@ -263,8 +283,14 @@ int runHausdorff(int argc, char** argv, int first) {
   std::fprintf(s, "  B: %s  %zu vertices, %zu triangles, area %.7g, diagonal %.7g\n",
                oneLine(b_path).c_str(), b.positions.size(), b.triangles.size(), surfaceArea(b),
                meshDiagonal(b));
-  std::fprintf(s, "  tolerance %.7g (%s%% of A's diagonal)\n\n", r.tolerance,
+  std::fprintf(s, "  tolerance %.7g (%s%% of A's diagonal)\n", r.tolerance,
                percentEstimate(r.tolerance, diagonal).c_str());
+  // Raised to the rounding floor (4e-12 of the coordinates): said, not only shown (found by an
+  // audit: "converged" alone read as the precision asked for).
+  if (r.tolerance > r.requested_tolerance)
+    std::fprintf(s, "  (raised from the %.7g asked for: the least tolerance at these coordinates)\n",
+                 r.requested_tolerance);
+  std::fprintf(s, "\n");
   printDirection(s, "A -> B", r.a_to_b, diagonal, r.tolerance, "A", "B");
   printDirection(s, "B -> A", r.b_to_a, diagonal, r.tolerance, "B", "A");
   std::fprintf(s, "\n  Hausdorff distance in [%s, %s]  (%s%% .. %s%% of diagonal)%s\n",
@@ -282,6 +308,7 @@ int runHausdorff(int argc, char** argv, int first) {
         ",\n  \"a_to_b\": " + jsonOneSided(r.a_to_b) + ",\n  \"b_to_a\": " +
         jsonOneSided(r.b_to_a) + ",\n  \"hausdorff\": {\"lower\": " + jsonNumber(r.lower) +
         ", \"upper\": " + jsonNumber(r.upper) + "},\n  \"tolerance\": " + jsonNumber(r.tolerance) +
+        ",\n  \"requested_tolerance\": " + jsonNumber(r.requested_tolerance) +
         ",\n  \"converged\": " + (r.converged ? "true" : "false") + ",\n  \"threads\": " +
         std::to_string(r.threads) + ",\n  \"seconds\": " + jsonNumber(r.seconds) +
         ",\n  \"build_seconds\": " + jsonNumber(r.build_seconds) +

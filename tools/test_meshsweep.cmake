@@ -356,6 +356,32 @@ else()
   math(EXPR failed "${failed} + 1")
 endif()
 
+# Found by an audit: a vertex no triangle uses has no distance; --colors wrote it as 0 and
+# blue (touching B). It is written with quality -1, grey. A tolerance below the rounding floor
+# is raised, and the summary says so (the JSON has both); a tolerance that parses as 0 says so.
+file(WRITE "${WORK_DIR}/unused.off" "OFF\n5 1 0\n0 0 0\n1 0 0\n0 1 0\n7 7 7\n8 8 8\n3 0 1 2\n")
+check(hausdorff_unused_colors RC 0 ARGS hausdorff unused.off point.off --colors unused.ply
+  OUT "Hausdorff distance in [")
+set(unused_ply "")
+if(EXISTS "${WORK_DIR}/unused.ply")
+  file(READ "${WORK_DIR}/unused.ply" unused_ply)
+endif()
+if(unused_ply MATCHES "\n7 7 7 -1 128 128 128\n8 8 8 -1 128 128 128\n3 0 1 2\n$")
+  math(EXPR passed "${passed} + 1")
+else()
+  message("FAIL hausdorff_unused_colors: unused vertices not grey with quality -1:\n${unused_ply}")
+  math(EXPR failed "${failed} + 1")
+endif()
+check(hausdorff_tolerance_raised RC 0 ARGS hausdorff quad.off point.off --tolerance 1e-20 --json -
+  ERR "(raised from the 1e-20 asked for: the least tolerance at these coordinates)"
+  OUT "\"requested_tolerance\": 9.9999999999999995e-21")
+check(hausdorff_tolerance_kept RC 0 ARGS hausdorff quad.off point.off --tolerance 1e-6
+  NOT_OUT "raised from")
+check(hausdorff_tolerance_rounds_to_zero RC 2 ARGS hausdorff quad.off point.off --tolerance 1e-400
+  ERR "--tolerance must be > 0 (got 1e-400, which rounds to 0)")
+check(hausdorff_relative_zero RC 2 ARGS hausdorff quad.off point.off --relative 0.0
+  ERR "--relative must be > 0 (got 0.0)")
+
 # --colors to standard output (found by review): the PLY alone on standard output, the summary
 # on standard error, also through /dev/stdout into a file (which reopened with truncation lost
 # the PLY); empty names are refused; the coordinates keep every digit (a mesh at 1e9 was
