@@ -106,6 +106,19 @@ function(same_files plain coherent)
   endif()
 endfunction()
 
+# expect(NAME CONDITION WHAT): CONDITION is an if() condition, evaluated here.
+function(expect name condition what)
+  cmake_language(EVAL CODE "if(${condition})\n set(ok TRUE)\nelse()\n set(ok FALSE)\nendif()")
+  if(ok)
+    math(EXPR passed "${passed} + 1")
+  else()
+    message("FAIL ${name}: ${what}")
+    math(EXPR failed "${failed} + 1")
+  endif()
+  set(passed ${passed} PARENT_SCOPE)
+  set(failed ${failed} PARENT_SCOPE)
+endfunction()
+
 set(header "point,rank,distance,lower,upper,triangle,x,y,z,b0,b1,b2\n")
 set(row2 "\n2,0,4.4721359549995796,4.4721359549995796,4.4721359549995796,0,1,0,0,0,1,0\n")
 
@@ -349,12 +362,7 @@ set(colors "")
 if(EXISTS "${WORK_DIR}/colors.ply")
   file(READ "${WORK_DIR}/colors.ply" colors LIMIT 4)
 endif()
-if(colors STREQUAL "ply\n")
-  math(EXPR passed "${passed} + 1")
-else()
-  message("FAIL hausdorff_json_stdout_colors: colors.ply starts with '${colors}'")
-  math(EXPR failed "${failed} + 1")
-endif()
+expect(hausdorff_json_stdout_colors "colors STREQUAL \"ply\n\"" "colors.ply starts with '${colors}'")
 
 # Found by an audit: a vertex no triangle uses has no distance; --colors wrote it as 0 and
 # blue (touching B). It is written with quality -1, grey. A tolerance below the rounding floor
@@ -366,12 +374,8 @@ set(unused_ply "")
 if(EXISTS "${WORK_DIR}/unused.ply")
   file(READ "${WORK_DIR}/unused.ply" unused_ply)
 endif()
-if(unused_ply MATCHES "\n7 7 7 -1 128 128 128\n8 8 8 -1 128 128 128\n3 0 1 2\n$")
-  math(EXPR passed "${passed} + 1")
-else()
-  message("FAIL hausdorff_unused_colors: unused vertices not grey with quality -1:\n${unused_ply}")
-  math(EXPR failed "${failed} + 1")
-endif()
+string(FIND "${unused_ply}" "\n7 7 7 -1 128 128 128\n8 8 8 -1 128 128 128\n3 0 1 2\n" at)
+expect(hausdorff_unused_colors "NOT at EQUAL -1" "unused vertices not grey with quality -1:\n${unused_ply}")
 check(hausdorff_tolerance_raised RC 0 ARGS hausdorff quad.off point.off --tolerance 1e-20 --json -
   ERR "(raised from the 1e-20 asked for: the least tolerance at these coordinates)"
   OUT "\"requested_tolerance\": 9.9999999999999995e-21")
@@ -424,18 +428,6 @@ check(hausdorff_zero_diagonal_percent RC 0 ARGS hausdorff dot.off quad.off --tol
 # Output files are written beside the destination and renamed over it: a run that fails
 # leaves an existing file as it was (dot.off has a zero diagonal); one that succeeds replaces
 # it, keeping its permissions; a link is written through.
-# expect(NAME CONDITION WHAT): CONDITION is an if() condition, evaluated here.
-function(expect name condition what)
-  cmake_language(EVAL CODE "if(${condition})\n set(ok TRUE)\nelse()\n set(ok FALSE)\nendif()")
-  if(ok)
-    math(EXPR passed "${passed} + 1")
-  else()
-    message("FAIL ${name}: ${what}")
-    math(EXPR failed "${failed} + 1")
-  endif()
-  set(passed ${passed} PARENT_SCOPE)
-  set(failed ${failed} PARENT_SCOPE)
-endfunction()
 file(WRITE "${WORK_DIR}/kept.json" "keep\n")
 file(CHMOD "${WORK_DIR}/kept.json" PERMISSIONS OWNER_READ OWNER_WRITE GROUP_READ)
 check(output_kept_on_error RC 1 ARGS hausdorff dot.off quad.off --json kept.json
