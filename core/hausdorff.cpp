@@ -1086,6 +1086,8 @@ void addCounters(HausdorffCounters& sum, const HausdorffCounters& c) {
 double effectiveTolerance(const HausdorffOptions& options, const Mesh& a) {
   if (!(options.tolerance >= 0) || !std::isfinite(options.tolerance))
     throw std::invalid_argument("hausdorff: tolerance must be finite and >= 0");
+  if (!(options.max_seconds >= 0) || !std::isfinite(options.max_seconds))
+    throw std::invalid_argument("hausdorff: max_seconds must be finite and >= 0 (0: no limit)");
   if (options.tolerance > 0) return options.tolerance;
   if (!(options.relative_tolerance > 0) || !std::isfinite(options.relative_tolerance))
     throw std::invalid_argument("hausdorff: relative tolerance must be finite and > 0");
@@ -1150,6 +1152,10 @@ HausdorffResult run(const Mesh& a, const std::shared_ptr<const Hierarchy>& a_hie
       const double excess_ba =
           ba ? ba->topUpper() - (std::max(ba->lower(), floor_ba) + tol) : -kInf;
       if (!(excess_ab > 0) && !(excess_ba > 0)) break;
+      if (options.max_seconds > 0 && secondsSince(start) > options.max_seconds) {
+        result.timed_out = true;  // not within the tolerance yet
+        break;
+      }
       // Refine the direction with the larger bound (tighten_both: the larger excess).
       const bool pick_ba =
           ba && excess_ba > 0 &&
@@ -1177,7 +1183,7 @@ HausdorffResult run(const Mesh& a, const std::shared_ptr<const Hierarchy>& a_hie
       result.upper = result.a_to_b.upper;
     }
   });
-  result.converged = result.converged && result.upper - result.lower <= tol;
+  result.converged = result.converged && !result.timed_out && result.upper - result.lower <= tol;
   result.seconds = secondsSince(start);
   return result;
 }

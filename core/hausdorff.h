@@ -72,6 +72,12 @@ struct HausdorffOptions {
   // Symmetric only: refine both directions until each one-sided interval meets the tolerance
   // (by default the dominated direction stops as soon as it provably cannot change H).
   bool tighten_both = false;
+  // When > 0: refinement stops after about this many seconds (checked between rounds, after
+  // the vertex pass and the first bounds, which always run), with the certified interval
+  // reached so far (HausdorffResult::timed_out, converged false). Where it stops then depends
+  // on the machine's speed. Surfaces that coincide but are triangulated differently are the
+  // case that needs it (see Limits).
+  double max_seconds = 0;
   // Called from the calling thread after the vertex pass and after each refinement round.
   // Optional; it must not throw.
   std::function<void(const HausdorffProgress&)> progress;
@@ -123,7 +129,9 @@ struct HausdorffResult {
   double requested_tolerance = 0;  // the tolerance asked for (absolute, or relative times A's
                                    // diagonal); below `tolerance` where it was raised
   bool converged = true;        // upper - lower <= tolerance (false only if refinement hit its
-                                // depth limit: sub-triangles below rounding size)
+                                // depth limit: sub-triangles below rounding size, or ran out of
+                                // HausdorffOptions::max_seconds)
+  bool timed_out = false;       // stopped by HausdorffOptions::max_seconds
   HausdorffCounters counters;   // both directions summed
   unsigned threads = 0;         // the worker threads it could use (HausdorffOptions::threads)
   double build_seconds = 0;     // hierarchies (0 when the caller passed them)
@@ -132,7 +140,7 @@ struct HausdorffResult {
 
 // Symmetric Hausdorff distance H(A, B) with both one-sided distances.
 // Throws MeshError if a mesh fails checkMesh() (empty, non-finite, indices out of range) and
-// std::invalid_argument if the tolerance is negative, NaN or infinite, or if the effective
+// std::invalid_argument if the tolerance or max_seconds is negative, NaN or infinite, or if the effective
 // tolerance is 0 (relative tolerance on a mesh of zero extent) or infinite (a relative one
 // past the largest double over A's diagonal).
 HausdorffResult hausdorff(const Mesh& a, const Mesh& b, const HausdorffOptions& options = {});

@@ -373,6 +373,39 @@ TEST_CASE("a coarse square over a fine grid with a pit: the maximum inside a coa
 // vertex or an edge midpoint of A. A piece of A is covered only by a point within target of all
 // three of its corners; a cover bound that skipped a corner or a piece, or read another
 // block's distances, would stop below the exact value at the looser tolerances.
+// max_seconds: a computation stopped between rounds keeps a certified interval (here the pit's
+// distance lies inside it), says it timed out, and is not converged; a run that meets its
+// tolerance before the limit is not timed out. A negative or NaN limit is refused.
+TEST_CASE("max_seconds stops refinement with a certified interval") {
+  const int n = 48;
+  const double depth = 0.05;
+  const Mesh coarse = scenes::gridPlane(1, 1.0);
+  Mesh fine = scenes::gridPlane(n, 1.0);
+  const VertexIndex pit = 16 * (n + 1) + 32;
+  fine.positions[pit].z() = -depth;
+  const double at_pit = bruteDistance(fine, Vec3(fine.positions[pit].x(), fine.positions[pit].y(), 0));
+  HausdorffOptions options = absolute(1e-9, 1);
+  options.max_seconds = 1e-9;  // past at the first check: after the vertex pass and first bounds
+  const HausdorffResult stopped = hausdorffOneSided(coarse, fine, options);
+  CHECK(stopped.timed_out);
+  CHECK_FALSE(stopped.converged);
+  CHECK(stopped.upper - stopped.lower > stopped.tolerance);
+  CHECK(stopped.lower <= at_pit);
+  CHECK(stopped.upper >= at_pit);
+  CHECK(stopped.counters.rounds == 0);
+  options.max_seconds = 60;
+  const HausdorffResult full = hausdorffOneSided(coarse, fine, options);
+  CHECK_FALSE(full.timed_out);
+  CHECK(full.converged);
+  CHECK(full.counters.rounds > 0);
+  CHECK(full.lower >= stopped.lower);
+  CHECK(full.upper <= stopped.upper);
+  for (const double bad : {-1.0, std::numeric_limits<double>::quiet_NaN(), std::numeric_limits<double>::infinity()}) {
+    options.max_seconds = bad;
+    CHECK_THROWS_WITH(hausdorff(coarse, fine, options), Catch::Contains("max_seconds must be finite and >= 0"));
+  }
+}
+
 TEST_CASE("a coarse square over a grid of points: the exact maximum between the points") {
   const double h = 0.01;
   for (const int n : {20, 23}) {

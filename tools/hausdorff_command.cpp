@@ -23,6 +23,7 @@ namespace meshsweeper::cli {
 const char kHausdorffHelp[] =
     "Usage: meshsweep hausdorff A B [--tolerance T | --relative R] [--json FILE]\n"
     "                           [--colors FILE.ply] [--threads N] [--both]\n"
+    "                           [--max-seconds S]\n"
     "\n"
     "Certified Hausdorff distance between meshes A and B (OFF, OBJ, PLY or STL), over every\n"
     "point of both surfaces, not only the vertices:\n"
@@ -41,6 +42,9 @@ const char kHausdorffHelp[] =
     "                   cannot change H stops as soon as that is proven, so its interval may be\n"
     "                   wider)\n"
     "  --threads N      worker threads, 0 = all (default); results do not depend on N\n"
+    "  --max-seconds S  stop refining after about S seconds (> 0) with the certified interval\n"
+    "                   reached so far (converged false, timed_out true); where it stops then\n"
+    "                   depends on the machine\n"
     "  --json FILE      write the result as JSON to FILE ('-' or /dev/stdout: standard output,\n"
     "                   the summary then goes to standard error)\n"
     "  --colors FILE    write A as an ASCII PLY (double coordinates) with per-vertex 'quality'\n"
@@ -51,7 +55,7 @@ const char kHausdorffHelp[] =
     "JSON keys: a, b {path, vertices, triangles, diagonal, area}; a_to_b, b_to_a {lower, upper,\n"
     "at [x,y,z], at_triangle, closest [x,y,z], closest_triangle, mean, rms, samples, queries,\n"
     "triangles_refined, cells}; hausdorff {lower, upper}; tolerance (used); requested_tolerance;\n"
-    "converged; threads; seconds; build_seconds; samples; queries; triangles_refined.\n"
+    "converged; timed_out; threads; seconds; build_seconds; samples; queries; triangles_refined.\n"
     "The tolerance used is the one asked for, raised where it is below the rounding floor (4e-12\n"
     "of the largest coordinate, measured from the centre of the meshes' joint box); the summary\n"
     "then says so.\n"
@@ -208,6 +212,7 @@ int runHausdorff(int argc, char** argv, int first) {
                    {"--json", true},
                    {"--colors", true},
                    {"--threads", true},
+                   {"--max-seconds", true},
                    {"--both", false}});
   args.expectPositional({"A", "B"});
   const std::string& a_path = args.positional()[0];
@@ -231,6 +236,12 @@ int runHausdorff(int argc, char** argv, int first) {
   if (args.has("--threads"))
     options.threads = static_cast<unsigned>(args.integer("--threads", 0, 4096));
   options.tighten_both = args.has("--both");
+  if (args.has("--max-seconds")) {
+    options.max_seconds = args.nonNegativeDouble("--max-seconds");
+    if (!(options.max_seconds > 0))
+      throw UsageError("hausdorff: --max-seconds must be > 0 (got " + args.value("--max-seconds") +
+                       roundsToZero(args.value("--max-seconds")));
+  }
   // A file written to standard output ("-", /dev/stdout, ...) takes it over: it is written
   // through the stream itself (reopening /dev/stdout would truncate what went before), and
   // the summary goes to standard error.
@@ -296,7 +307,9 @@ int runHausdorff(int argc, char** argv, int first) {
   std::fprintf(s, "\n  Hausdorff distance in [%s, %s]  (%s%% .. %s%% of diagonal)%s\n",
                outwardBound(r.lower, 7, false).c_str(), outwardBound(r.upper, 7, true).c_str(),
                percentBound(r.lower, diagonal, false).c_str(), percentBound(r.upper, diagonal, true).c_str(),
-               r.converged ? "" : "  (tolerance not reached: refinement hit rounding size)");
+               r.converged ? ""
+               : r.timed_out ? "  (tolerance not reached: stopped by --max-seconds)"
+                             : "  (tolerance not reached: refinement hit rounding size)");
   std::fprintf(s, "  time %.3f s (hierarchies %.3f s), %llu samples, %llu triangles refined\n",
                r.seconds, r.build_seconds, static_cast<unsigned long long>(r.counters.samples),
                static_cast<unsigned long long>(r.counters.triangles_refined));
@@ -309,7 +322,8 @@ int runHausdorff(int argc, char** argv, int first) {
         jsonOneSided(r.b_to_a) + ",\n  \"hausdorff\": {\"lower\": " + jsonNumber(r.lower) +
         ", \"upper\": " + jsonNumber(r.upper) + "},\n  \"tolerance\": " + jsonNumber(r.tolerance) +
         ",\n  \"requested_tolerance\": " + jsonNumber(r.requested_tolerance) +
-        ",\n  \"converged\": " + (r.converged ? "true" : "false") + ",\n  \"threads\": " +
+        ",\n  \"converged\": " + (r.converged ? "true" : "false") +
+        ",\n  \"timed_out\": " + (r.timed_out ? "true" : "false") + ",\n  \"threads\": " +
         std::to_string(r.threads) + ",\n  \"seconds\": " + jsonNumber(r.seconds) +
         ",\n  \"build_seconds\": " + jsonNumber(r.build_seconds) +
         ",\n  \"samples\": " + std::to_string(r.counters.samples) +

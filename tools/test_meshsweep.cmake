@@ -381,6 +381,15 @@ check(hausdorff_tolerance_raised RC 0 ARGS hausdorff quad.off point.off --tolera
   OUT "\"requested_tolerance\": 9.9999999999999995e-21")
 check(hausdorff_tolerance_kept RC 0 ARGS hausdorff quad.off point.off --tolerance 1e-6
   NOT_OUT "raised from")
+# --max-seconds: two triangulations of one square (the costly case: cells grow as 1 /
+# tolerance) at 1e-9 stop at the limit with their interval, exit 0; a limit of 0 is refused.
+file(WRITE "${WORK_DIR}/square_a.off" "OFF\n4 2 0\n0 0 0\n1 0 0\n1 1 0\n0 1 0\n3 0 1 2\n3 0 2 3\n")
+file(WRITE "${WORK_DIR}/square_b.off" "OFF\n4 2 0\n0 0 0\n1 0 0\n1 1 0\n0 1 0\n3 0 1 3\n3 1 2 3\n")
+check(hausdorff_max_seconds RC 0 ARGS hausdorff square_a.off square_b.off --relative 1e-9 --max-seconds 0.2
+  --json - OUT "\"timed_out\": true" "\"converged\": false"
+  ERR "(tolerance not reached: stopped by --max-seconds)")
+check(hausdorff_max_seconds_zero RC 2 ARGS hausdorff quad.off point.off --max-seconds 0
+  ERR "--max-seconds must be > 0 (got 0)")
 check(hausdorff_tolerance_rounds_to_zero RC 2 ARGS hausdorff quad.off point.off --tolerance 1e-400
   ERR "--tolerance must be > 0 (got 1e-400, which rounds to 0)")
 check(hausdorff_relative_zero RC 2 ARGS hausdorff quad.off point.off --relative 0.0
