@@ -169,8 +169,9 @@ struct BestHit {
   double touch = 0;       // surfaceRounding() at q
 };
 
-// Per-thread scratch: one stream per body slot, candidate lists, rebuild buffers.
-struct Scratch {
+// Per-thread scratch: one stream per body slot, candidate lists, rebuild buffers. Aligned to
+// cache lines: neighbours in Impl::scratch belong to threads running at once.
+struct alignas(64) Scratch {
   std::vector<StreamSlot> streams;      // [slot]
   std::vector<BestHit> best;            // [local point] closest hit of a block's point
   std::vector<uint32_t> found;          // one point's broadphase answer
@@ -1359,7 +1360,7 @@ void DistanceService::stepInto(PointsRef points, double max_distance, QueryMode 
   for (Body& b : m.bodies) b.leaves_tested = 0;
   // Scratch left at its largest by one big step (a within step at a large distance: megabytes
   // per thread and body) is freed, found by an audit; what a usual step uses stays.
-  constexpr size_t kKeepHits = 1024, kKeepSlots = size_t{1} << 16;
+  constexpr size_t kKeepHits = 4096, kKeepSlots = size_t{1} << 16;
   for (Scratch& s : m.scratch) {
     for (size_t slot = 0; slot < s.streams.size(); ++slot) {
       StreamSlot& ss = s.streams[slot];

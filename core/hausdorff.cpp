@@ -1213,27 +1213,29 @@ void jointBox(const Mesh& mesh, Vec3& lower, Vec3& upper) {
     }
 }
 
-// The copy of `mesh` moved by -shift; returns the largest rounding error of a used vertex.
+// The copy of `mesh` with its used vertices moved by -shift (the others, which no distance
+// reads, stay as they are: moved, one could leave the coordinate range checkMesh allows; found
+// by review); returns a bound on how far a moved vertex lies from its exact translate: sqrt(3)
+// times its largest coordinate error (not the root of the squares, which could underflow).
 double translated(const Mesh& mesh, const Vec3& shift, Mesh& out) {
   out.name = mesh.name;
   out.triangles = mesh.triangles;
-  out.positions.resize(mesh.positions.size());
-  std::vector<double> error(mesh.positions.size(), 0.0);
-  for (size_t v = 0; v < mesh.positions.size(); ++v) {
-    double e2 = 0;
-    for (int axis = 0; axis < 3; ++axis) {
-      const double x = mesh.positions[v][axis], y = -shift[axis];
-      const double sum = x + y, back = sum - x;
-      const double e = (x - (sum - back)) + (y - back);  // x + y = sum + e exactly
-      out.positions[v][axis] = sum;
-      e2 += e * e;
-    }
-    error[v] = e2;
-  }
-  double worst2 = 0;
+  out.positions = mesh.positions;
+  std::vector<uint8_t> moved(mesh.positions.size(), 0);
+  double worst = 0;
   for (const Triangle& t : mesh.triangles)
-    for (VertexIndex v : t) worst2 = std::max(worst2, error[v]);
-  return worst2 > 0 ? std::sqrt(worst2) * (1 + 4 * kEps) : 0.0;
+    for (VertexIndex v : t) {
+      if (moved[v]) continue;
+      moved[v] = 1;
+      for (int axis = 0; axis < 3; ++axis) {
+        const double x = mesh.positions[v][axis], y = -shift[axis];
+        const double sum = x + y, back = sum - x;
+        const double e = (x - (sum - back)) + (y - back);  // x + y = sum + e exactly
+        out.positions[v][axis] = sum;
+        worst = std::max(worst, std::abs(e));
+      }
+    }
+  return worst > 0 ? worst * 1.7320508075688774 * (1 + 4 * kEps) : 0.0;
 }
 
 Centred centred(const Mesh& a, const Mesh* b) {
@@ -1252,16 +1254,21 @@ Centred centred(const Mesh& a, const Mesh* b) {
   return c;
 }
 
-// The tolerance to ask of the centred computation, whose bounds then widen by 2 * error.
+// The tolerance to ask of the centred computation, whose bounds then widen by 2 * error (and
+// round: a few ulps less).
 HausdorffOptions centredOptions(const HausdorffOptions& options, const Mesh& a, const Centred& c) {
   HausdorffOptions inner = options;
   const double tolerance = effectiveTolerance(options, a);
-  inner.tolerance = tolerance - 2 * c.error > 0 ? tolerance - 2 * c.error : tolerance;
+  const double less = (tolerance - 2 * c.error) * (1 - 8 * kEps);
+  inner.tolerance = c.error > 0 && less > 0 ? less : tolerance;
   return inner;
 }
 
-// Back to the original coordinates: witnesses shifted, bounds widened by the copies' error.
-void uncentre(HausdorffResult& r, const Centred& c, bool symmetric) {
+// Back to the original coordinates: witnesses shifted, bounds widened by the copies' error;
+// the tolerance is the one asked for unless the centred run raised its own.
+void uncentre(HausdorffResult& r, const Centred& c, bool symmetric, double requested) {
+  const bool raised = r.tolerance > r.requested_tolerance;
+  r.requested_tolerance = requested;
   for (OneSidedHausdorff* h : {&r.a_to_b, &r.b_to_a}) {
     if (h == &r.b_to_a && !symmetric) continue;
     h->at += c.shift;
@@ -1276,6 +1283,8 @@ void uncentre(HausdorffResult& r, const Centred& c, bool symmetric) {
     r.upper += c.error;
     r.tolerance += 2 * c.error;
   }
+  if (!raised) r.tolerance = requested;
+  r.converged = r.converged && r.upper - r.lower <= r.tolerance;
 }
 
 }  // namespace
@@ -1302,8 +1311,7 @@ HausdorffResult hausdorff(const Mesh& a, const Mesh& b, const HausdorffOptions& 
   });
   if (!c.moved) return run(ha->mesh(), ha, hb, options, start, secondsSince(start));
   HausdorffResult r = run(ha->mesh(), ha, hb, centredOptions(options, a, c), start, secondsSince(start));
-  r.requested_tolerance = effectiveTolerance(options, a);
-  uncentre(r, c, true);
+  uncentre(r, c, true, effectiveTolerance(options, a));
   return r;
 }
 
@@ -1320,11 +1328,13 @@ HausdorffResult hausdorffOneSided(const Mesh& a, const Mesh& b, const HausdorffO
   checkOrThrow(b);
   effectiveTolerance(options, a);
   const Centred c = centred(a, &b);
-  if (!c.moved) return run(a, nullptr, Hierarchy::build(b), options, start, secondsSince(start));
-  const std::shared_ptr<const Hierarchy> hb = Hierarchy::build(c.b);
-  HausdorffResult r = run(c.a, nullptr, hb, centredOptions(options, a, c), start, secondsSince(start));
-  r.requested_tolerance = effectiveTolerance(options, a);
-  uncentre(r, c, false);
+  // Built before the call: its arguments' order is unspecified (build_seconds read the clock
+  // first; found by review).
+  const std::shared_ptr<const Hierarchy> hb = Hierarchy::build(c.moved ? c.b : b);
+  const double build_seconds = secondsSince(start);
+  if (!c.moved) return run(a, nullptr, hb, options, start, build_seconds);
+  HausdorffResult r = run(c.a, nullptr, hb, centredOptions(options, a, c), start, build_seconds);
+  uncentre(r, c, false, effectiveTolerance(options, a));
   return r;
 }
 

@@ -125,7 +125,8 @@ struct HausdorffResult {
   double tolerance = 0;         // the absolute tolerance used: the requested one, raised to
                                 // 4e-12 times the largest coordinate magnitude (the rounding
                                 // margin; the Mesh entry points measure coordinates from the
-                                // centre of the meshes' joint box, see Limits)
+                                // centre of the meshes' joint box, see Limits, and a tolerance
+                                // raised there also covers that translation's rounding)
   double requested_tolerance = 0;  // the tolerance asked for (absolute, or relative times A's
                                    // diagonal); below `tolerance` where it was raised
   bool converged = true;        // upper - lower <= tolerance (false only if refinement hit its

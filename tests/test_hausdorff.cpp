@@ -511,6 +511,15 @@ TEST_CASE("meshes far from the origin: the tolerance asked for, witnesses in pla
     CHECK(in_place.lower <= step);
     CHECK(in_place.upper >= step);
   }
+  // Found by review: an unused vertex moved with the others could leave the coordinate range
+  // (the mesh was then refused); unused vertices stay where they are.
+  Mesh dot;
+  dot.positions = {Vec3::Constant(6e149), Vec3::Constant(6e149), Vec3::Constant(6e149), Vec3(-6e149, 0, 0)};
+  dot.triangles = {Triangle{0, 1, 2}};
+  const HausdorffResult dots = hausdorff(dot, dot, absolute(1e-3));
+  CHECK(dots.lower == 0);
+  CHECK(dots.upper <= dots.tolerance);
+  CHECK(dots.a_to_b.at == Vec3::Constant(6e149));
 }
 
 TEST_CASE("relative tolerance, degenerate triangles and several components") {
