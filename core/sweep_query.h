@@ -59,6 +59,8 @@ struct CoherenceCounters {
   uint64_t steps = 0;           // coherent queries answered
   uint64_t certified = 0;       // answered from the cached candidate set
   uint64_t rebuilds = 0;        // candidate set rebuilt (a depth-first query)
+  uint64_t searched = 0;        // closestCoherent(p) backing off: a depth-first query, no set
+                                // (certified + rebuilds + searched = its queries)
   uint64_t candidates = 0;      // candidate faces gathered over all rebuilds
   uint64_t front_resets = 0;    // dynamic front restarted from the roots
   uint64_t recomputed = 0;      // stale front entries recomputed
@@ -296,6 +298,10 @@ class QueryStream {
   Vec3 last_point_ = Vec3::Zero();
   TriangleIndex last_face_ = kInvalidIndex;
   double mean_step_ = 0;
+  // closestCoherent(p)'s back-off, as CoherentState's closest_wait, closest_backoff, set_steps
+  // and set_unmeasured: after a set that failed within two tests, plain searches for a while.
+  uint8_t closest_wait_ = 0, closest_backoff_ = 0, set_steps_ = 0;
+  bool set_unmeasured_ = false;
   // Dynamic front (closestWithinCoherent, kClosestCoherent).
   std::vector<DriftEntry> front_;
   std::vector<DriftEntry> popped_;

@@ -191,7 +191,8 @@ int runClosest(int argc, char** argv, int first) {
   if (path) {
     const CoherenceCounters& c = stream.coherence();
     coherence = ", \"certified\": " + std::to_string(c.certified) + ", \"rebuilds\": " +
-                std::to_string(c.rebuilds) + ", \"front_resets\": " + std::to_string(c.front_resets);
+                std::to_string(c.rebuilds) + ", \"searched\": " + std::to_string(c.searched) +
+                ", \"front_resets\": " + std::to_string(c.front_resets);
   }
   std::fprintf(stderr,
                "{\"mesh\": %s, \"vertices\": %zu, \"triangles\": %zu, \"points\": %zu, "
