@@ -211,6 +211,16 @@ std::string numberText(double value) {
   return text;
 }
 
+// Erases the entries of a cache whose weakly held table is gone (`expired(entry)`), once the
+// cache has doubled since the last sweep (a sweep per new entry made adding many entries
+// quadratic); `swept` keeps the size the last sweep left.
+template <class Map, class Expired>
+void sweepExpired(Map& cache, size_t& swept, Expired expired) {
+  if (cache.size() < 2 * swept + 16) return;
+  for (auto i = cache.begin(); i != cache.end();) i = expired(i->second) ? cache.erase(i) : std::next(i);
+  swept = cache.size();
+}
+
 std::string bodyName(BodyHandle h) { return "body " + std::to_string(h.index); }
 
 bool hitOrder(const DistanceHit& a, const DistanceHit& b) {
@@ -641,9 +651,10 @@ struct DistanceService::Impl {
       broadphase.set(s, bodies[s].box);
     }
     broadphase.prepare();  // the tree over many bodies, before the threads read it
-    max_scale = 0;
-    for (const Body& b : bodies)
-      if (b.alive) max_scale = std::max(max_scale, b.scale);
+    max_scale = 0;  // read only past kTreeBodies (blockCandidates)
+    if (broadphase.liveCount() > Broadphase::kTreeBodies)
+      for (const Body& b : bodies)
+        if (b.alive) max_scale = std::max(max_scale, b.scale);
     return static_cast<uint32_t>(dirty.size());
   }
 
@@ -1019,13 +1030,7 @@ std::shared_ptr<const Hierarchy> DistanceService::hierarchyFor(const Mesh& mesh)
   e.triangles = mesh.triangles.data();
   e.vertex_count = mesh.positions.size();
   e.triangle_count = mesh.triangles.size();
-  // Forget the entries whose hierarchy nothing holds any more, once the table has doubled
-  // since the last sweep (as shapeFor does).
-  if (m.mesh_cache.size() >= 2 * m.mesh_cache_swept + 16) {
-    for (auto i = m.mesh_cache.begin(); i != m.mesh_cache.end();)
-      i = i->second.hierarchy.expired() ? m.mesh_cache.erase(i) : std::next(i);
-    m.mesh_cache_swept = m.mesh_cache.size();
-  }
+  sweepExpired(m.mesh_cache, m.mesh_cache_swept, [](const MeshCacheEntry& entry) { return entry.hierarchy.expired(); });
   return hierarchy;
 }
 
@@ -1039,13 +1044,7 @@ std::shared_ptr<const BodyShape> DistanceService::shapeFor(const std::shared_ptr
   if (shape && shape->hierarchy() == hierarchy) return shape;
   shape = BodyShape::build(hierarchy);
   entry = shape;
-  // Forget shapes no body uses any more, once the table has doubled since the last sweep (a
-  // sweep per new shape made adding bodies of distinct meshes quadratic).
-  if (impl_->shapes.size() >= 2 * impl_->shapes_swept + 16) {
-    for (auto i = impl_->shapes.begin(); i != impl_->shapes.end();)
-      i = i->second.expired() ? impl_->shapes.erase(i) : std::next(i);
-    impl_->shapes_swept = impl_->shapes.size();
-  }
+  sweepExpired(impl_->shapes, impl_->shapes_swept, [](const auto& weak) { return weak.expired(); });
   return shape;
 }
 

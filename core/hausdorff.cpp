@@ -1205,14 +1205,6 @@ struct Centred {
   bool moved = false;
 };
 
-void jointBox(const Mesh& mesh, Vec3& lower, Vec3& upper) {
-  for (const Triangle& t : mesh.triangles)
-    for (VertexIndex v : t) {
-      lower = lower.cwiseMin(mesh.positions[v]);
-      upper = upper.cwiseMax(mesh.positions[v]);
-    }
-}
-
 // The copy of `mesh` with its used vertices moved by -shift (the others, which no distance
 // reads, stay as they are: moved, one could leave the coordinate range checkMesh allows; found
 // by review); returns a bound on how far a moved vertex lies from its exact translate: sqrt(3)
@@ -1240,9 +1232,14 @@ double translated(const Mesh& mesh, const Vec3& shift, Mesh& out) {
 
 Centred centred(const Mesh& a, const Mesh* b) {
   Centred c;
-  Vec3 lower = Vec3::Constant(kInf), upper = Vec3::Constant(-kInf);
-  jointBox(a, lower, upper);
-  if (b) jointBox(*b, lower, upper);
+  Vec3 lower, upper;  // the joint box of the used vertices
+  meshBounds(a, lower, upper);
+  if (b) {
+    Vec3 b_lower, b_upper;
+    meshBounds(*b, b_lower, b_upper);
+    lower = lower.cwiseMin(b_lower);
+    upper = upper.cwiseMax(b_upper);
+  }
   const Vec3 centre = 0.5 * lower + 0.5 * upper;
   const double now = lower.cwiseAbs().cwiseMax(upper.cwiseAbs()).maxCoeff();
   const double then = (upper - lower).maxCoeff() / 2;
@@ -1256,9 +1253,8 @@ Centred centred(const Mesh& a, const Mesh* b) {
 
 // The tolerance to ask of the centred computation, whose bounds then widen by 2 * error (and
 // round: a few ulps less).
-HausdorffOptions centredOptions(const HausdorffOptions& options, const Mesh& a, const Centred& c) {
+HausdorffOptions centredOptions(const HausdorffOptions& options, double tolerance, const Centred& c) {
   HausdorffOptions inner = options;
-  const double tolerance = effectiveTolerance(options, a);
   const double less = (tolerance - 2 * c.error) * (1 - 8 * kEps);
   inner.tolerance = c.error > 0 && less > 0 ? less : tolerance;
   return inner;
@@ -1300,7 +1296,7 @@ HausdorffResult hausdorff(const Mesh& a, const Mesh& b, const HausdorffOptions& 
   const auto start = Clock::now();
   checkOrThrow(a);
   checkOrThrow(b);
-  effectiveTolerance(options, a);  // fail before building
+  const double tolerance = effectiveTolerance(options, a);  // fail before building
   const Centred c = centred(a, &b);
   const Mesh& ca = c.moved ? c.a : a;
   const Mesh& cb = c.moved ? c.b : b;
@@ -1310,8 +1306,8 @@ HausdorffResult hausdorff(const Mesh& a, const Mesh& b, const HausdorffOptions& 
     tbb::parallel_invoke([&] { ha = Hierarchy::build(ca); }, [&] { hb = Hierarchy::build(cb); });
   });
   if (!c.moved) return run(ha->mesh(), ha, hb, options, start, secondsSince(start));
-  HausdorffResult r = run(ha->mesh(), ha, hb, centredOptions(options, a, c), start, secondsSince(start));
-  uncentre(r, c, true, effectiveTolerance(options, a));
+  HausdorffResult r = run(ha->mesh(), ha, hb, centredOptions(options, tolerance, c), start, secondsSince(start));
+  uncentre(r, c, true, tolerance);
   return r;
 }
 
@@ -1326,15 +1322,15 @@ HausdorffResult hausdorffOneSided(const Mesh& a, const Mesh& b, const HausdorffO
   const auto start = Clock::now();
   checkOrThrow(a);
   checkOrThrow(b);
-  effectiveTolerance(options, a);
+  const double tolerance = effectiveTolerance(options, a);
   const Centred c = centred(a, &b);
   // Built before the call: its arguments' order is unspecified (build_seconds read the clock
   // first; found by review).
   const std::shared_ptr<const Hierarchy> hb = Hierarchy::build(c.moved ? c.b : b);
   const double build_seconds = secondsSince(start);
   if (!c.moved) return run(a, nullptr, hb, options, start, build_seconds);
-  HausdorffResult r = run(c.a, nullptr, hb, centredOptions(options, a, c), start, build_seconds);
-  uncentre(r, c, false, effectiveTolerance(options, a));
+  HausdorffResult r = run(c.a, nullptr, hb, centredOptions(options, tolerance, c), start, build_seconds);
+  uncentre(r, c, false, tolerance);
   return r;
 }
 

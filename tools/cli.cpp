@@ -109,6 +109,15 @@ double Args::nonNegativeDouble(const char* name) const {
   return x;
 }
 
+double Args::positiveDouble(const char* name) const {
+  const double x = nonNegativeDouble(name);
+  if (x > 0) return x;
+  // Digits not all zero in the mantissa: it rounded to 0 (1e-400).
+  const std::string& text = value(name);
+  const bool rounded = text.substr(0, text.find_first_of("eE")).find_first_of("123456789") != std::string::npos;
+  throw UsageError(command_ + ": " + name + " must be > 0 (got " + text + (rounded ? ", which rounds to 0)" : ")"));
+}
+
 uint64_t Args::integer(const char* name, uint64_t min, uint64_t max) const {
   return parseInteger(value(name), command_ + ": " + name, min, max);
 }

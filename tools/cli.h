@@ -69,6 +69,9 @@ class Args {
   // Typed values, validated strictly. Each throws UsageError naming the option.
   // A finite double >= 0 (rejects NaN, infinity, negative, trailing garbage).
   double nonNegativeDouble(const char* name) const;
+  // The same, > 0: a number that parses as 0 is refused with its text ("must be > 0 (got 0)",
+  // or "(got 1e-400, which rounds to 0)").
+  double positiveDouble(const char* name) const;
   // A decimal integer in [min, max] (digits only: no sign, no exponent, no fraction).
   uint64_t integer(const char* name, uint64_t min, uint64_t max) const;
 

@@ -65,13 +65,6 @@ const char kHausdorffHelp[] =
 
 namespace {
 
-// ")" or, for a number whose digits are not all zero that parsed as 0 (1e-400), ", which
-// rounds to 0)": the end of a "must be > 0 (got TEXT" message.
-std::string roundsToZero(const std::string& text) {
-  const std::string mantissa = text.substr(0, text.find_first_of("eE"));
-  return mantissa.find_first_of("123456789") != std::string::npos ? ", which rounds to 0)" : ")";
-}
-
 double percent(double value, double diagonal) { return diagonal > 0 ? 100 * value / diagonal : 0; }
 
 // A bound as a percentage of the diagonal, rounded outward: 5 decimals, 7 significant digits
@@ -221,27 +214,12 @@ int runHausdorff(int argc, char** argv, int first) {
   HausdorffOptions options;
   if (args.has("--tolerance") && args.has("--relative"))
     throw UsageError("hausdorff: --tolerance and --relative cannot be combined");
-  if (args.has("--tolerance")) {
-    options.tolerance = args.nonNegativeDouble("--tolerance");
-    if (!(options.tolerance > 0))
-      throw UsageError("hausdorff: --tolerance must be > 0 (got " + args.value("--tolerance") +
-                       roundsToZero(args.value("--tolerance")));
-  }
-  if (args.has("--relative")) {
-    options.relative_tolerance = args.nonNegativeDouble("--relative");
-    if (!(options.relative_tolerance > 0))
-      throw UsageError("hausdorff: --relative must be > 0 (got " + args.value("--relative") +
-                       roundsToZero(args.value("--relative")));
-  }
+  if (args.has("--tolerance")) options.tolerance = args.positiveDouble("--tolerance");
+  if (args.has("--relative")) options.relative_tolerance = args.positiveDouble("--relative");
   if (args.has("--threads"))
     options.threads = static_cast<unsigned>(args.integer("--threads", 0, 4096));
   options.tighten_both = args.has("--both");
-  if (args.has("--max-seconds")) {
-    options.max_seconds = args.nonNegativeDouble("--max-seconds");
-    if (!(options.max_seconds > 0))
-      throw UsageError("hausdorff: --max-seconds must be > 0 (got " + args.value("--max-seconds") +
-                       roundsToZero(args.value("--max-seconds")));
-  }
+  if (args.has("--max-seconds")) options.max_seconds = args.positiveDouble("--max-seconds");
   // A file written to standard output ("-", /dev/stdout, ...) takes it over: it is written
   // through the stream itself (reopening /dev/stdout would truncate what went before), and
   // the summary goes to standard error.
