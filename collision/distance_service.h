@@ -24,7 +24,9 @@
 // point's work depends only on that point, its states and the bodies, and every result is
 // written to its own slot, so results are bitwise identical for any number of threads.
 // The service itself is not thread-safe: call its methods from one thread at a time, and do not
-// change bodies during step().
+// change bodies during step(). Which thread that is may change from call to call, and a call may
+// come from inside the caller's own TBB tasks (step() runs in the service's arena); separate
+// services may step at once, sharing hierarchies.
 //
 // Exactness: every distance is exact (the hierarchy queries are exact, rigid bodies are queried
 // in their own frame, deforming bodies through proven bounds), so no [lower, upper] is carried:

@@ -27,6 +27,7 @@
 
 #include <Eigen/Geometry>
 #include <tbb/global_control.h>
+#include <tbb/parallel_for.h>
 
 #include <algorithm>
 #include <atomic>
@@ -1249,6 +1250,44 @@ TEST_CASE("scratch stays bounded: calling threads and a within step over every f
   CHECK(service.threads() == threads);
   CHECK(service.scratchBytes() <= before + 8 * 1024);
   CHECK_THROWS_WITH(service.step(toMatrix(points), -1e-300), Catch::Contains("(got -1e-300)"));
+}
+
+// The thread contract (distance_service.h): one caller at a time per service, but separate
+// services may step at once on shared hierarchies, and a step may be called from inside the
+// caller's own TBB tasks. Each service here must answer exactly as one stepped alone.
+TEST_CASE("services stepped at once, from inside the caller's TBB tasks, equal one stepped alone", "[service]") {
+  const Mesh sphere = scenes::icosphere(3, 1.0);
+  const Mesh torus = scenes::torus(1.0, 0.3, 40, 16);
+  const auto sphere_h = Hierarchy::build(sphere);
+  const auto torus_h = Hierarchy::build(torus);
+  const std::vector<Vec3> points = scenes::nearSurfacePoints(sphere, 400, 0.2, 11);
+  constexpr int kServices = 6, kSteps = 4;
+  // Service k: a rigid sphere, a deforming torus, the points moved by k; step s's results.
+  auto run = [&](int k, std::vector<StepResult>& out) {
+    DistanceService service(ServiceOptions{static_cast<unsigned>(1 + k % 2), 32});
+    const BodyHandle rigid = service.addRigid(sphere_h);
+    const BodyHandle soft = service.addDeforming(torus_h, 0.05);
+    out.assign(kSteps, StepResult{});
+    for (int s = 0; s < kSteps; ++s) {
+      service.setPose(rigid, makePose(0.05 * s, Vec3(0, 0, 1), Vec3(0.01 * k, 0, 0)));
+      service.setPositions(soft, wave(torus.positions, Vec3::Zero(), 0.02, 0.3 * s + k));
+      std::vector<Vec3> moved = points;
+      for (Vec3& p : moved) p += Vec3(0.002 * s, 0.001 * k, 0);
+      service.step(toMatrix(moved), 0.25, s % 2 ? QueryMode::kWithin : QueryMode::kClosest, out[s]);
+    }
+  };
+  std::vector<std::vector<StepResult>> alone(kServices), together(kServices);
+  for (int k = 0; k < kServices; ++k) run(k, alone[k]);
+  tbb::parallel_for(0, kServices, [&](int k) { run(k, together[k]); });
+  Failures failures("services at once");
+  size_t hits = 0;
+  for (int k = 0; k < kServices; ++k)
+    for (int s = 0; s < kSteps; ++s) {
+      checkIdentical(alone[k][s], together[k][s], failures);
+      hits += alone[k][s].stats().hits;
+    }
+  CHECK(failures.count() == 0);
+  CHECK(hits > 1000);
 }
 
 TEST_CASE("shared tables: hierarchyFor caches by mesh, shapes shared per hierarchy", "[service]") {
