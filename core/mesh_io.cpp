@@ -66,6 +66,9 @@ constexpr std::size_t kMaxPlyHeaderBytes = std::size_t(1) << 20;
 // Smallest ASCII OFF vertex line ("0 0 0\n") and face line ("3 0 1 2" + newline, minus slack).
 constexpr std::uint64_t kMinOffVertexBytes = 6;
 constexpr std::uint64_t kMinOffFaceBytes = 6;
+// Most vertices and faces an OFF file may declare in all: CGAL's header reader estimates
+// 2.1 (vertices + faces + 10) half-edges in an int (found by fuzzing, with its edge count).
+constexpr std::uint64_t kMaxOffElements = 1000000000;
 
 enum class Format { kOff, kObj, kPly, kStl };
 
@@ -304,7 +307,8 @@ OffHeader checkOffHeader(const std::string& path, std::istream& in, std::uint64_
     fail(path, "the OFF header line with the vertex and face counts has no edge count (write "
                "'" + std::to_string(header.vertices) + " " + std::to_string(header.faces) +
                " 0')");
-  if (edges > static_cast<std::uint64_t>(std::numeric_limits<int>::max()))  // CGAL reads an int
+  // CGAL reads the count as an int and doubles it in an int (found by fuzzing: 2^30 overflowed).
+  if (edges > static_cast<std::uint64_t>(std::numeric_limits<int>::max() / 2))
     fail(path, "the OFF header's edge count " + std::to_string(edges) + " is too large (it is not read: write 0)");
   // CGAL reads the rest of the counts' line as vertex 0's (found by review: '3 1 0 9 9 9' made
   // (9, 9, 9) vertex 0, and every vertex one later): only blanks and a comment may follow.
@@ -335,6 +339,9 @@ OffHeader checkOffHeader(const std::string& path, std::istream& in, std::uint64_
                    " bytes, but only " + std::to_string(body) +
                    " bytes follow the header (truncated file or wrong counts)");
   }
+  if (header.vertices + header.faces > kMaxOffElements)
+    fail(path, "the OFF header declares " + plural(header.vertices, "vertex") + " and " + plural(header.faces, "face") +
+                   ": more than " + std::to_string(kMaxOffElements) + " in all, which CGAL's OFF reader cannot count");
   return header;
 }
 
@@ -1368,8 +1375,8 @@ std::string cgalRejected(Format format, const std::string& diagnosis) {
       return "malformed OFF data (vertex lines need 3 numbers, face lines 'k i1 ... ik' with "
              "indices below the vertex count)";
     case Format::kObj:
-      return "malformed OBJ file (a 'v' line without 3 numbers, an unsupported statement such "
-             "as 'curv', or no vertices or faces)";
+      return "malformed OBJ file (a 'v' line without 3 numbers, a statement that OBJ does not "
+             "define, or no vertices or faces)";
     case Format::kPly:
       return "malformed PLY data (CGAL's reader stopped before the end)";
     case Format::kStl:

@@ -227,6 +227,17 @@ TEST_CASE("OFF header variants: counts on the keyword line, CRLF, COFF colours",
                Contains("a comment right after the 'OFF' keyword"));
     CHECK_THAT(readError(dir.write("edges.off", "OFF\n4 1 99999999999\n" + square + "4 0 1 2 3\n")),
                Contains("edge count 99999999999 is too large"));
+    // Found by fuzzing: CGAL doubles the edge count in an int (2^30 overflowed), and estimates
+    // 2.1 (vertices + faces) half-edges in an int (a sparse file of 8 GB stands for the body).
+    CHECK_THAT(readError(dir.write("edges30.off", "OFF\n4 1 1073741824\n" + square + "4 0 1 2 3\n")),
+               Contains("edge count 1073741824 is too large"));
+    CHECK(meshsweeper::readMesh(dir.write("edges29.off", "OFF\n4 1 1073741823\n" + square + "4 0 1 2 3\n"))
+              .positions == kSquare);
+    const std::string huge = dir.write("huge.off", "OFF\n600000000 500000000 0\n0 0 0\n");
+    std::error_code sparse;
+    std::filesystem::resize_file(huge, 8000000000ull, sparse);
+    if (!sparse)
+      CHECK_THAT(readError(huge), Contains("600000000 vertices and 500000000 faces: more than 1000000000 in all"));
     // Found by review: CGAL read what follows the counts on their line as vertex 0.
     CHECK_THAT(readError(dir.write("after.off", "OFF\n3 1 0 9 9 9\n0 0 0\n1 0 0\n3 0 1 2\n3 0 1 2\n")),
                Contains("the OFF header line has more after its counts: '9' (CGAL would read it as vertex 0"));
