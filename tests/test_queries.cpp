@@ -803,3 +803,21 @@ TEST_CASE("queries: points that are not finite or beyond 1e153 are answered with
   REQUIRE(c.triangle != kInvalidIndex);
   CHECK(std::abs(c.distance - bruteForceClosest(mesh, far).distance) <= 1e-12 * c.distance);
 }
+
+// The documented floor (README "Errors", found by an audit): a face and a point within about
+// 1e-154 of the origin, where squared distances underflow, are exact to about 2e-162 absolute.
+TEST_CASE("queries: distances below 1.5e-154 are exact to 2e-162 absolute", "[queries][underflow]") {
+  Mesh mesh;
+  mesh.positions = {Vec3(1e-300, 0, 0), Vec3(0, 1e-300, 0), Vec3(0, 0, 1e-300),
+                    Vec3(0, 0, 1), Vec3(1, 0, 1), Vec3(0, 1, 1)};
+  mesh.triangles = {Triangle{0, 1, 2}, Triangle{3, 4, 5}};
+  QueryStream stream(Hierarchy::build(mesh));
+  // The plane x + y + z = 1e-300, from (s, s, s): (3 s - 1e-300) / sqrt(3).
+  for (double s : {1e-140, 1e-155, 1e-160, 1e-170, 1e-295}) {
+    const double expected = (3 * s - 1e-300) / std::sqrt(3.0);
+    const ClosestPoint c = stream.closest(Vec3(s, s, s));
+    CHECK(c.triangle == 0);
+    CHECK(std::abs(c.distance - expected) <= 2e-162 + 1e-12 * expected);
+    if (s >= 1e-154) CHECK(std::abs(c.distance - expected) <= 1e-12 * expected);
+  }
+}
