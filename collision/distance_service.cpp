@@ -612,7 +612,12 @@ struct DistanceService::Impl {
         box.upper = box.upper.cwiseMax(w);
         extent = std::max(extent, w.cwiseAbs().maxCoeff());
       }
-      // Rounding of the transform (the query runs in the body frame).
+      // Rounding of the transform (the query runs in the body frame): relative to the terms
+      // summed, the rest coordinates and the translation, not to the result alone. A body
+      // whose rest coordinates are about 1e6, posed near the world origin, rounds its corners
+      // by about 1e-10 (found by an audit: surface points were missed at max_distance 0).
+      extent += lo.cwiseAbs().cwiseMax(hi.cwiseAbs()).maxCoeff() +
+                b.rigid->pose().translation().cwiseAbs().maxCoeff();
       const double margin = 1e-12 * extent;
       box.lower.array() -= margin;
       box.upper.array() += margin;

@@ -1055,6 +1055,55 @@ TEST_CASE("points on the surface are hits at distance 0 with the pseudonormal's 
   CHECK(faces > projected.size() / 2);
 }
 
+// A rigid body whose rest coordinates are far from its rest origin (1e3 and 1e6), posed so that
+// a corner lies at the world origin: its world box's corners round by about eps times the rest
+// coordinates, not the world ones. Surface points, transformed exactly (long double, rounded
+// once), must be hits at max_distance 0 (found by an audit: 17 of 840 were missed at 1e6).
+TEST_CASE("surface points of a rigid body posed far from its rest coordinates are hits at distance 0", "[service][sign]") {
+  const auto exactWorld = [](const Eigen::Isometry3d& pose, const Vec3& x) {
+    Vec3 out;
+    for (int r = 0; r < 3; ++r) {
+      long double sum = pose.translation()[r];
+      for (int c = 0; c < 3; ++c) sum += static_cast<long double>(pose.linear()(r, c)) * x[c];
+      out[r] = static_cast<double>(sum);
+    }
+    return out;
+  };
+  struct Case {
+    Vec3 lo, hi, corner, edge, axis;
+  };
+  const std::vector<Case> cases = {
+      {Vec3(1000, 0, -1), Vec3(1001, 2000, 1), Vec3(1000, 0, -1), Vec3(0, 0, 0.1), Vec3::UnitZ()},
+      {Vec3(1e6, 1e6, 1e6), Vec3(1e6 + 1, 1e6 + 1, 1e6 + 1), Vec3(1e6, 1e6, 1e6), Vec3(0, 0, 0.05),
+       Vec3(1, 2, 3).normalized()}};
+  for (const Case& c : cases) {
+    Mesh box;
+    for (int i = 0; i < 8; ++i)
+      box.positions.push_back(Vec3(i & 1 ? c.hi.x() : c.lo.x(), i & 2 ? c.hi.y() : c.lo.y(), i & 4 ? c.hi.z() : c.lo.z()));
+    box.triangles = {{0, 2, 1}, {1, 2, 3}, {4, 5, 6}, {5, 7, 6}, {0, 1, 4}, {1, 5, 4},
+                     {2, 6, 3}, {3, 6, 7}, {0, 4, 2}, {2, 4, 6}, {1, 3, 5}, {3, 7, 5}};
+    DistanceService service;
+    const auto hierarchy = service.hierarchyFor(box);
+    Failures failures("posed far from its rest coordinates");
+    for (int a = 1; a <= 40; ++a) {
+      Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();
+      pose.linear() = Eigen::AngleAxisd(0.05 * a, c.axis).toRotationMatrix();
+      pose.translation() = -exactWorld(pose, c.corner);
+      const BodyHandle body = service.addRigid(hierarchy, pose);
+      std::vector<Vec3> points;  // on the edge through the corner
+      for (int i = 0; i <= 20; ++i) points.push_back(exactWorld(pose, c.corner + i * c.edge));
+      for (QueryMode mode : {QueryMode::kClosest, QueryMode::kWithin}) {
+        const StepResult r = service.step(toMatrix(points), 0.0, mode);
+        for (size_t i = 0; i < points.size(); ++i)
+          failures.check(!r.hits(i).empty() && r.hits(i)[0].distance < 1e-9,
+                         [&] { return "angle " + num(0.05 * a) + ": no hit at " + text(points[i]); });
+      }
+      service.remove(body);
+    }
+    CHECK(failures.checks() == 2 * 40 * 21);
+  }
+}
+
 TEST_CASE("pseudonormals on demand equal the precomputed rest tables", "[service][sign]") {
   for (const Mesh& mesh : {scenes::torus(1.0, 0.3, 12, 7), scenes::icosphere(1), scenes::gridPlane(3)}) {
     INFO(mesh.name);
