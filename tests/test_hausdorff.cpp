@@ -831,3 +831,53 @@ TEST_CASE("printed bounds round outward") {
     }
   }
 }
+
+namespace {
+
+void addSheetAt(Mesh& m, double z, int nx, int ny, double x0, double x1, double y0, double y1) {
+  const VertexIndex base = static_cast<VertexIndex>(m.positions.size());
+  for (int j = 0; j <= ny; ++j)
+    for (int i = 0; i <= nx; ++i)
+      m.positions.emplace_back(x0 + (x1 - x0) * i / nx, y0 + (y1 - y0) * j / ny, z);
+  auto id = [&](int i, int j) { return base + static_cast<VertexIndex>(j * (nx + 1) + i); };
+  for (int j = 0; j < ny; ++j)
+    for (int i = 0; i < nx; ++i) {
+      m.triangles.push_back({id(i, j), id(i + 1, j), id(i + 1, j + 1)});
+      m.triangles.push_back({id(i, j), id(i + 1, j + 1), id(i, j + 1)});
+    }
+}
+
+}  // namespace
+
+// A sliver (width about 8e-6, below 1e-3 of the tolerance: a thin cell) crossing the mid-plane
+// between two sheets, 0.5 from each: h(A, B) = 0.5 exactly, at the line where it crosses, while
+// every sample (corners, midpoints of the long edge) lies at 0.5 - 4e-6. The upper bound must
+// still cover 0.5: a thin cell's children are bounded with its thickness (a mutation test:
+// without it no other test failed).
+TEST_CASE("hausdorff: a sliver crossing the mid-plane between two sheets", "[hausdorff]") {
+  const double t = 4e-6, w = 1e-6, tol = 0.01;
+  Mesh a;
+  a.name = "sliver";
+  a.positions = {Vec3(0, 0, 0.5 - t), Vec3(10, 0, 0.5 - t), Vec3(5, w, 0.5 + t)};
+  a.triangles = {{0, 1, 2}};
+  Mesh b;
+  b.name = "sheets";
+  // Cells 0.625 wide, aligned with x = 0 and with the row boundary y = 0: the pieces of the
+  // sliver's halves (the cover bound's 1/8 pieces of a 5-long segment) each lie over one face,
+  // exactly at distance 0.5 - t, while the sliver's own pieces (1.25 long) straddle two.
+  addSheetAt(b, 0.0, 20, 2, -1.25, 11.25, -1, 1);
+  addSheetAt(b, 1.0, 20, 2, -1.25, 11.25, -1, 1);
+  HausdorffOptions options;
+  options.tolerance = tol;
+  options.threads = 1;
+  // The exact h(A, B): the point of A on z = 0.5 (A's edge from a to c crosses it).
+  const double exact = 0.5;
+  for (bool one_sided : {true, false}) {
+    const HausdorffResult r = one_sided ? hausdorffOneSided(a, b, options) : hausdorff(a, b, options);
+    INFO("one_sided " << one_sided << " lower " << r.a_to_b.lower << " upper " << r.a_to_b.upper);
+    CHECK(r.a_to_b.lower <= exact);
+    CHECK(r.a_to_b.upper >= exact);  // certified: h(A, B) <= upper
+    CHECK(r.upper >= exact);
+    CHECK(r.upper - r.lower <= r.tolerance * (1 + 1e-9));
+  }
+}

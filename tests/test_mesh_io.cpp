@@ -1088,6 +1088,12 @@ TEST_CASE("readMesh refuses out-of-range indices and faces with fewer than 3 cor
   for (std::uint32_t v : {0u, 1u, 2u}) putU32(binary, v);
   CHECK(meshsweeper::readMesh(dir.write("fine_binary.ply", binary)).triangles.size() == 1);
   CHECK(meshsweeper::readMesh(dir.write("newline_binary.ply", binary + "\n")).triangles.size() == 1);
+  // Up to 16 blank bytes after the last element are a text editor's trailing newlines; more are
+  // refused, as any other data would be (a mutation test found no test of the limit).
+  CHECK(meshsweeper::readMesh(dir.write("blank16_binary.ply", binary + std::string(16, '\n'))).triangles.size() == 1);
+  for (size_t blanks : {17, 64})
+    CHECK_THAT(readError(dir.write("blank_binary.ply", binary + std::string(blanks, ' '))),
+               Contains(std::to_string(blanks) + " bytes follow the last element the header declares"));
   std::string negative_binary = binary.substr(0, binary.size() - 4);
   putU32(negative_binary, 0xfffffffeu);  // int -2
   CHECK_THAT(readError(dir.write("negative_binary.ply", negative_binary)),
@@ -1095,6 +1101,18 @@ TEST_CASE("readMesh refuses out-of-range indices and faces with fewer than 3 cor
   putU32(binary, 7);
   CHECK_THAT(readError(dir.write("extra_binary.ply", binary)),
              Contains("4 bytes follow the last element the header declares"));
+}
+
+// The same check on a mesh built in memory (checkMesh, which Hierarchy::build calls): one past
+// the last vertex is out of range.
+TEST_CASE("checkMesh refuses out-of-range indices of a mesh built in memory", "[mesh_io]") {
+  Mesh mesh;
+  mesh.name = "built";
+  mesh.positions = {Vec3(0, 0, 0), Vec3(1, 0, 0), Vec3(0, 1, 0)};
+  mesh.triangles = {Triangle{0, 1, 2}, Triangle{2, 1, 3}};
+  CHECK(meshsweeper::checkMesh(mesh) == "built: triangle 1 uses vertex 3 but the mesh has 3 vertices");
+  mesh.triangles[1] = Triangle{2, 1, 0};
+  CHECK(meshsweeper::checkMesh(mesh).empty());
 }
 
 TEST_CASE("readMesh refuses meshes without faces", "[mesh_io]") {
