@@ -35,11 +35,15 @@ void packSlotBoxes(Node8& n, const SlotBoxes& boxes, double magnitude) {
   for (int k = 0; k < 8; ++k) {
     used[k] = boxes.lower[0][k] <= boxes.upper[0][k];  // else empty (NaN: never a box)
     if (!used[k]) continue;
+    bool finite = true;
     for (int axis = 0; axis < 3; ++axis) {
       centres[axis][used_count] = 0.5 * boxes.lower[axis][k] + 0.5 * boxes.upper[axis][k];
+      finite = finite && std::isfinite(centres[axis][used_count]);
       magnitude = std::max({magnitude, std::abs(boxes.lower[axis][k]), std::abs(boxes.upper[axis][k])});
     }
-    ++used_count;
+    // An unbounded box (interpolated from a key frame past the float range) is no centre: the
+    // origin stays finite, and such a node's slots become infinite (the slack below).
+    used_count += finite;
   }
   // Any origin is valid. The median of the used slots' centres (per axis) sits among most of
   // them: a node that holds a far-away part in one slot keeps the others' offsets small.
@@ -232,8 +236,11 @@ void refitBounds(const Hierarchy& h, const Vec3* positions, std::vector<Node8>& 
               // Plus the rounding of the centre's coordinates (relative 2^-52 of their size).
               const double reach = std::sqrt(squaredDistanceToTriangle(centre, a, b, c)) + 0.5 * (hi - lo).norm() +
                                    centre.cwiseAbs().maxCoeff() * 0x1p-48;
+              // An unbounded box (past the float range of the scaled units) gives no reach (NaN,
+              // from its centre): its subtree is visited (found by an audit).
               const double squared_reach = reach * reach * (1 + 1e-6);
-              if (squared_reach > worst) pending.emplace_back(squared_reach, m.child[j]);
+              if (!(squared_reach <= worst))
+                pending.emplace_back(std::isnan(squared_reach) ? std::numeric_limits<double>::infinity() : squared_reach, m.child[j]);
             }
             std::sort(pending.begin() + static_cast<std::ptrdiff_t>(first), pending.end(),
                       [](const auto& x, const auto& y) { return x.first < y.first; });

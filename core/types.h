@@ -5,6 +5,7 @@
 
 #include <array>
 #include <cmath>
+#include <limits>
 #include <cstdint>
 
 namespace meshsweeper {
@@ -28,11 +29,27 @@ inline bool inCoordinateRange(const Vec3& x, double limit = kMaxCoordinate) {
   return std::abs(x.x()) <= limit && std::abs(x.y()) <= limit && std::abs(x.z()) <= limit;
 }
 
-// A float no smaller than x >= 0, without a branch: x is raised by more than rounding to float
-// can take off (2^-24 relative for normal floats, 2^-150 absolute below them).
-inline float floatAtLeast(double x) { return static_cast<float>(x * (1 + 0x1p-23) + 0x1p-148); }
+// A float no smaller than x >= 0: x is raised by more than rounding to float can take off
+// (2^-24 relative for normal floats, 2^-150 absolute below them); past the float range, +inf.
+inline float floatAtLeast(double x) {
+  const double y = x * (1 + 0x1p-23) + 0x1p-148;
+  return y <= std::numeric_limits<float>::max() ? static_cast<float>(y) : std::numeric_limits<float>::infinity();
+}
 // The same for any sign: a float no smaller (floatAbove) or no larger (floatBelow) than x.
-inline float floatAbove(double x) { return static_cast<float>(x + (x < 0 ? -x : x) * 0x1p-23 + 0x1p-148); }
-inline float floatBelow(double x) { return static_cast<float>(x - (x < 0 ? -x : x) * 0x1p-23 - 0x1p-148); }
+// Past the float range they saturate on the side that stays a bound: floatAbove of a value
+// below -FLT_MAX is -FLT_MAX (a plain conversion gives -inf, which is no upper bound; found by
+// an audit: a key frame 1e39 times its rest size), floatBelow of one above FLT_MAX is FLT_MAX.
+inline float floatAbove(double x) {
+  constexpr double kMax = std::numeric_limits<float>::max();
+  if (x < -kMax) return -std::numeric_limits<float>::max();
+  const double y = x + (x < 0 ? -x : x) * 0x1p-23 + 0x1p-148;
+  return y > kMax ? std::numeric_limits<float>::infinity() : static_cast<float>(y);  // NaN stays NaN
+}
+inline float floatBelow(double x) {
+  constexpr double kMax = std::numeric_limits<float>::max();
+  if (x > kMax) return std::numeric_limits<float>::max();
+  const double y = x - (x < 0 ? -x : x) * 0x1p-23 - 0x1p-148;
+  return y < -kMax ? -std::numeric_limits<float>::infinity() : static_cast<float>(y);
+}
 
 }  // namespace meshsweeper

@@ -25,6 +25,8 @@ DeformingBody::DeformingBody(std::shared_ptr<const Hierarchy> hierarchy)
   anchor_positions_ = h.mesh().positions;
   positions_ = anchor_positions_;
   delta_.assign(positions_.size(), 0.0);
+  const std::vector<TriangleIndex>& vertex_face = h.vertexFace();
+  unused_vertices_ = std::find(vertex_face.begin(), vertex_face.end(), kInvalidIndex) != vertex_face.end();
   geometry_.hierarchy = hierarchy_.get();
   geometry_.nodes = nodes_.data();
   geometry_.leaf_blocks = nullptr;  // faces are gathered from the current positions
@@ -277,8 +279,10 @@ void DeformingBody::anchor(const std::vector<Vec3>& positions) {
 
 void DeformingBody::reanchor(const std::vector<Vec3>& positions) {
   checkSize(positions.size(), "anchor positions");
+  const TriangleIndex* used = unused_vertices_ ? hierarchy_->vertexFace().data() : nullptr;
   double moved2 = 0;
-  for (size_t v = 0; v < positions.size(); ++v) moved2 = std::max(moved2, (positions[v] - positions_[v]).squaredNorm());
+  for (size_t v = 0; v < positions.size(); ++v)
+    if (!used || used[v] != kInvalidIndex) moved2 = std::max(moved2, (positions[v] - positions_[v]).squaredNorm());
   const uint64_t lineage = geometry_.lineage;
   const double drift = geometry_.drift;
   anchor(positions);  // checks the positions; throws with the body unchanged
@@ -359,12 +363,15 @@ DisplacementCheck DeformingBody::setPositions(const std::vector<Vec3>& positions
   // (Skipped while the motion is uniform: growRegionDrift then grows every region by the largest.)
   const bool by_region = regionalDrift() && regions_.uniform_skips == 0;
   double* motion2 = by_region ? regions_.vertex_motion2.data() : nullptr;
+  // A vertex no face uses moves nothing a query reads: its motion is no drift (found by an
+  // audit: one such vertex jumping by 1e100 kept every certificate from holding).
+  const TriangleIndex* used = unused_vertices_ ? hierarchy_->vertexFace().data() : nullptr;
   for (size_t v = 0; v < positions.size(); ++v) {
     const Vec3 d = positions[v] - anchor_positions_[v];
     const double d2 = d.squaredNorm();
     finite &= inCoordinateRange(positions[v]);
     suspect |= d2 > delta_[v] * delta_[v] * (1 - 1e-12);
-    const double step2 = (positions[v] - positions_[v]).squaredNorm();
+    const double step2 = used && used[v] == kInvalidIndex ? 0.0 : (positions[v] - positions_[v]).squaredNorm();
     moved2 = std::max(moved2, step2);
     if (motion2) motion2[v] = step2;
     lower = lower.cwiseMin(positions[v]);

@@ -103,6 +103,7 @@ class DeformingBody {
   LeafVertices leaf_vertices_;             // built by the first inflate()
   std::vector<TriangleBlock8> leaf_blocks_;  // [leaf] faces at positions_ (setInlineFaces)
   bool radii_ = true;                        // anchor() computes eps (setRadii)
+  bool unused_vertices_ = false;             // some vertex no face uses (its motion is no drift)
   void refreshInlineFaces();
   // Drift by region (setRegionalDrift).
   void setupRegions();

@@ -59,11 +59,12 @@ KeyframeBody::KeyframeBody(std::shared_ptr<const Hierarchy> hierarchy,
     slotDisplacements(h, moved, subtree, corners);
     std::vector<float>& delta = delta_.emplace_back(8 * nodes.size(), 0.0f);
     for (size_t i = 0; i < delta.size(); ++i)
-      delta[i] = std::nextafter(static_cast<float>((subtree[i] + corners[i]) * (1 + 1e-9)),
-                                std::numeric_limits<float>::infinity());
+      delta[i] = floatAtLeast((subtree[i] + corners[i]) * (1 + 1e-9));  // +inf past the float range
   }
   nodes_ = h.nodes();
   positions_ = frames_[0];
+  const std::vector<TriangleIndex>& vertex_face = h.vertexFace();
+  unused_vertices_ = std::find(vertex_face.begin(), vertex_face.end(), kInvalidIndex) != vertex_face.end();
   geometry_.hierarchy = hierarchy_.get();
   geometry_.nodes = nodes_.data();
   geometry_.leaf_blocks = nullptr;  // faces are gathered from the interpolated positions
@@ -76,12 +77,13 @@ KeyframeBody::KeyframeBody(std::shared_ptr<const Hierarchy> hierarchy,
 }
 
 namespace {
-double clampedTime(double t, size_t frames) {
-  return std::clamp(std::isnan(t) ? 0.0 : t, 0.0, static_cast<double>(frames - 1));  // +inf: the last frame
-}
+double clampedTime(double t, size_t frames) { return std::clamp(t, 0.0, static_cast<double>(frames - 1)); }
 }  // namespace
 
 void KeyframeBody::interpolatedBounds(double t, std::vector<Node8>& out_nodes) const {
+  // As setTime (found by an audit: NaN was read as time 0 here).
+  if (!std::isfinite(t))
+    throw std::invalid_argument("KeyframeBody::interpolatedBounds: the time " + std::to_string(t) + " is not finite");
   const size_t last = frames_.size() - 1;
   t = clampedTime(t, frames_.size());
   const size_t f = std::min(static_cast<size_t>(t), last == 0 ? 0 : last - 1);
@@ -105,8 +107,10 @@ void KeyframeBody::interpolatedBounds(double t, std::vector<Node8>& out_nodes) c
       for (int axis = 0; axis < 3; ++axis) {
         const double lo_a = box_a[node].lower[axis][k], lo_b = box_b[node].lower[axis][k];
         const double hi_a = box_a[node].upper[axis][k], hi_b = box_b[node].upper[axis][k];
-        boxes.lower[axis][k] = wr * lo_a + s * lo_b;
-        boxes.upper[axis][k] = wr * hi_a + s * hi_b;
+        // A frame's bound past the float range reads back infinite: a weight of 0 leaves it
+        // out (0 * inf is NaN, which would read as an empty slot; found by an audit).
+        boxes.lower[axis][k] = s == 0 ? lo_a : wr == 0 ? lo_b : wr * lo_a + s * lo_b;
+        boxes.upper[axis][k] = s == 0 ? hi_a : wr == 0 ? hi_b : wr * hi_a + s * hi_b;
         magnitude = std::max({magnitude, std::abs(lo_a), std::abs(lo_b), std::abs(hi_a), std::abs(hi_b)});
       }
     }
@@ -117,8 +121,8 @@ void KeyframeBody::interpolatedBounds(double t, std::vector<Node8>& out_nodes) c
     }
     const float* delta = &delta_[f][8 * node];
     for (int k = 0; k < 8; ++k) {
-      const double from_a = na.eps[k] + s * delta[k];
-      const double from_b = nb.eps[k] + (1 - s) * delta[k];
+      const double from_a = s == 0 ? na.eps[k] : na.eps[k] + s * delta[k];  // delta may be inf
+      const double from_b = wr == 0 ? nb.eps[k] : nb.eps[k] + wr * delta[k];
       out.eps[k] = floatAtLeast(std::min(from_a, from_b));
     }
   }
@@ -135,10 +139,13 @@ void KeyframeBody::setTime(double t) {
   const double s = last == 0 ? 0.0 : time_ - static_cast<double>(f);
   const std::vector<Vec3>& a = frames_[f];
   const std::vector<Vec3>& b = frames_[last == 0 ? 0 : f + 1];
-  double moved2 = 0;  // how far the farthest vertex moved: the lineage's drift grows by that
+  // How far the farthest vertex moved: the lineage's drift grows by that. A vertex no face uses
+  // does not count (found by an audit: one still at 1e100 moved 1e84 by rounding each time).
+  const TriangleIndex* used = unused_vertices_ ? hierarchy_->vertexFace().data() : nullptr;
+  double moved2 = 0;
   for (size_t v = 0; v < positions_.size(); ++v) {
     const Vec3 x = (1 - s) * a[v] + s * b[v];
-    moved2 = std::max(moved2, (x - positions_[v]).squaredNorm());
+    if (!used || used[v] != kInvalidIndex) moved2 = std::max(moved2, (x - positions_[v]).squaredNorm());
     positions_[v] = x;
   }
   geometry_.drift = grownDrift(geometry_.drift, std::sqrt(moved2));

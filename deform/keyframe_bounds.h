@@ -36,7 +36,8 @@ class KeyframeBody {
   const std::vector<Vec3>& positions() const { return positions_; }
   const std::shared_ptr<const Hierarchy>& hierarchy() const { return hierarchy_; }
 
-  // The nodes setTime(t) gives, written to `out`; the body does not change. `out` is filled
+  // The nodes setTime(t) gives, written to `out`; the body does not change (a time that is not
+  // finite throws std::invalid_argument, as setTime). `out` is filled
   // with this body's nodes when its size differs, else (reused from an earlier call for this
   // body) only their bounds are written. The part of setTime() that a benchmark compares with
   // a BVH refit.
@@ -52,6 +53,7 @@ class KeyframeBody {
   std::vector<Vec3> positions_;
   TreeGeometry geometry_;
   double time_ = 0;
+  bool unused_vertices_ = false;  // some vertex no face uses (its motion is no drift)
 };
 
 }  // namespace meshsweeper

@@ -32,9 +32,11 @@
 #include <cmath>
 #include <cstring>
 #include <filesystem>
+#include <functional>
 #include <limits>
 #include <map>
 #include <memory>
+#include <set>
 #include <sstream>
 #include <stdexcept>
 #include <string>
@@ -600,6 +602,27 @@ void checkInflated(const Mesh& mesh, size_t points, size_t path_steps, uint64_t 
   }
 }
 
+std::set<VertexIndex> subtreeVertices(const Hierarchy& h, ChildRef c) {
+  uint32_t first, last;
+  if (isLeafRef(c)) { first = leafIndex(c); last = first + 1; }
+  else { first = h.leafBegin(c); last = h.leafEnd(c); }
+  std::set<VertexIndex> out;
+  for (uint32_t leaf = first; leaf < last; ++leaf)
+    for (uint32_t lane = 0; lane < h.leafLanes(leaf); ++lane)
+      for (VertexIndex v : h.mesh().triangles[h.leafTriangles()[8 * leaf + lane]]) out.insert(v);
+  return out;
+}
+
+// Moves the triangle of vertices base, base + 1, base + 2 by at most `step` toward having its
+// centroid at `target`; true once it is there.
+bool moveTriangleToward(std::vector<Vec3>& x, VertexIndex base, const Vec3& target, double step) {
+  const Vec3 centre = (x[base] + x[base + 1] + x[base + 2]) / 3.0;
+  const Vec3 to = target - centre;
+  const Vec3 move = to.norm() > step ? Vec3(step * to.normalized()) : to;
+  for (int k = 0; k < 3; ++k) x[base + k] += move;
+  return (target - (centre + move)).norm() < 1e-9;
+}
+
 }  // namespace
 
 TEST_CASE("rigid bodies: random poses every step", "[deform][rigid]") {
@@ -869,6 +892,58 @@ TEST_CASE("deform: a part far from the rest keeps tight boxes when moving", "[de
   }
 }
 
+// Each slot's triangle's third corner and the subtree vertex farthest from it move apart by D
+// each: the distance from that vertex to the triangle can grow by 2D, which a slot's bound
+// covers only with the displacement of all three corners (a mutation test: corners 0 and 1
+// alone passed every other test). Through key frames (t = 0.5) and inflated bounds alike, every
+// slot must still bound every subtree vertex (validateGeometry).
+TEST_CASE("moving bounds: a slot triangle's third corner and a subtree vertex moving apart", "[deform][keyframe][inflated]") {
+  const Mesh mesh = scenes::icosphere(2);
+  const auto h = Hierarchy::build(mesh);
+  const double D = 4.0;  // twice the sphere's diameter
+  int scenarios = 0, keyframe_bad = 0, inflated_bad = 0;
+  for (size_t node = 0; node < h->nodes().size(); ++node) {
+    const Node8& n = h->nodes()[node];
+    for (int k = 0; k < 8; ++k) {
+      if (n.child[k] == kEmptyChild) continue;
+      const VertexIndex a = n.corner[0][k], b = n.corner[1][k], c = n.corner[2][k];
+      const Vec3& pc = mesh.positions[c];
+      VertexIndex x = kInvalidIndex;
+      double far = -1;
+      for (VertexIndex v : subtreeVertices(*h, n.child[k])) {
+        if (v == a || v == b || v == c) continue;
+        const double d = (mesh.positions[v] - pc).norm();
+        if (d > far) { far = d; x = v; }
+      }
+      if (x == kInvalidIndex) continue;
+      const Vec3 u = (mesh.positions[x] - pc).normalized();
+      std::vector<Vec3> moved = mesh.positions;
+      moved[x] += (D * (1 - 1e-9)) * u;  // within the bound D despite rounding
+      moved[c] -= (D * (1 - 1e-9)) * u;
+      ++scenarios;
+      {
+        KeyframeBody body(h, {mesh.positions, moved});
+        body.setTime(0.5);
+        const std::string problem = validateGeometry(*h, body.geometry());
+        if (!problem.empty()) { ++keyframe_bad; UNSCOPED_INFO("key frames, slot " << node << "/" << k << ": " << problem); }
+      }
+      {
+        DeformingBody body(h);
+        std::vector<double> delta(mesh.positions.size(), 0.0);
+        delta[x] = delta[c] = D;
+        body.inflate(delta);
+        REQUIRE(body.setPositions(moved).accepted);
+        const std::string problem = validateGeometry(*h, body.geometry());
+        if (!problem.empty()) { ++inflated_bad; UNSCOPED_INFO("inflated, slot " << node << "/" << k << ": " << problem); }
+      }
+    }
+  }
+  INFO(scenarios << " scenarios");
+  CHECK(scenarios > 0);
+  CHECK(keyframe_bad == 0);
+  CHECK(inflated_bad == 0);
+}
+
 TEST_CASE("key frames: one frame", "[deform][keyframe]") {
   const Mesh mesh = scenes::torus(1.0, 0.3, 48, 24);
   const auto h = Hierarchy::build(mesh);
@@ -884,6 +959,50 @@ TEST_CASE("key frames: one frame", "[deform][keyframe]") {
     CHECK(body.positions() == now.positions);
     CHECK(validateGeometry(*h, body.geometry()) == "");
     checkFreshQueries(now, stream, queryPoints(now, 40, 10, 4, 11), checks);
+  }
+}
+
+// Frames far larger than the rest mesh: in the hierarchy's scaled units (the rest mesh maps to
+// [-1, 1]) their boxes pass the float range. Found by an audit: a frame 1e39 times the rest
+// sphere made the boxes infinite, the interpolation's 0 * inf read as empty slots, and half of
+// the answers at t = 0, the rest frame itself, were wrong. A deforming body anchored there
+// packed boxes of [-inf, -FLT_MAX] (a conversion to float of -1e39 rounding to -inf).
+TEST_CASE("key frames and deforming bodies past the float range of the rest mesh's units", "[deform][keyframe][inflated]") {
+  const Mesh mesh = scenes::icosphere(2);  // radius 1
+  const auto h = Hierarchy::build(mesh);
+  Random random(39);
+  for (double factor : {1e39, 1e45}) {
+    std::vector<Vec3> large = mesh.positions;
+    for (Vec3& v : large) v *= factor;
+    KeyframeBody keyframed(h, {mesh.positions, large});
+    DeformingBody deforming(h);
+    deforming.anchor(large);
+    for (double t : {0.0, 1e-300, 0.5, 1.0, -1.0}) {
+      const bool key = t >= 0;  // -1: the deforming body
+      INFO("factor " << factor << (key ? ", key frames at t = " : ", deforming body") << t);
+      if (key) keyframed.setTime(t);
+      const TreeGeometry& geometry = key ? keyframed.geometry() : deforming.geometry();
+      const std::vector<Vec3>& now = key ? keyframed.positions() : deforming.positions();
+      CHECK(validateGeometry(*h, geometry) == "");
+      QueryStream stream(h);
+      stream.setGeometry(&geometry);
+      const Mesh world = withPositions(mesh, now);
+      Failures failures("past the float range");
+      for (int i = 0; i < 300; ++i) {
+        const Vec3 p = now[random.index(now.size())] * random.uniform(0.95, 1.05) +
+                       0.01 * now[0].norm() * randomUnit(random);
+        const ClosestPoint got = stream.closest(p);
+        const BruteHit truth = bruteForceClosest(world, p);
+        failures.check(std::abs(got.distance - truth.distance) <= 1e-12 * truth.distance, [&] {
+          return "at " + text(p) + ": " + num(got.distance) + " (triangle " + std::to_string(got.triangle) +
+                 "), brute force " + num(truth.distance) + " (triangle " + std::to_string(truth.triangle) + ")";
+        });
+      }
+      CHECK(failures.checks() == 300);
+    }
+    CHECK_THROWS_AS(keyframed.setTime(std::nan("")), std::invalid_argument);
+    std::vector<Node8> out;
+    CHECK_THROWS_AS(keyframed.interpolatedBounds(std::nan(""), out), std::invalid_argument);
   }
 }
 
@@ -1318,14 +1437,7 @@ TEST_CASE("drift by region: far faces that come close are seen", "[deform][regio
     size_t certified_steps = 0, reanchors = 0;
     bool reached = false;
     for (int step = 0; step < 60; ++step) {
-      if (step >= 10) {  // the triangle jumps toward the point, to 0.03 below it
-        const Vec3 target = p + Vec3(0, 0, -0.03);
-        const Vec3 centre = (x[base] + x[base + 1] + x[base + 2]) / 3.0;
-        const Vec3 to = target - centre;
-        const Vec3 move = to.norm() > 0.15 ? Vec3(0.15 * to.normalized()) : to;
-        for (int k = 0; k < 3; ++k) x[base + k] += move;
-        reached |= (target - (centre + move)).norm() < 1e-9;
-      }
+      if (step >= 10) reached |= moveTriangleToward(x, base, p + Vec3(0, 0, -0.03), 0.15);  // to 0.03 below it
       if (step >= 30) x[base + 5].z() = std::max(0.5 - 0.02 * (step - 29), 0.03);  // the sliver dips
       if (!body.setPositions(x).accepted) {
         body.reanchor(x);
@@ -1420,6 +1532,56 @@ TEST_CASE("drift by region: a face beyond a width comes down on a high point", "
 // A motion over the whole body (a wave) gains nothing from regions: after a change that shows
 // it, the next changes grow every region's drifts by the largest motion (no per-region pass);
 // once only the arm moves, the regions far from it stop growing again. Exact throughout.
+// A small triangle far from a plane, with a displacement bound large enough to reach a point
+// above the plane, travels there within one epoch (no reanchor). Its region's anchor box lies
+// beyond the point's neighbourhood: only that box grown by the displacement bound puts its
+// motion in the drift the point's certificate reads (a mutation test: without the growth no
+// other test failed).
+TEST_CASE("drift by region: a far triangle with a large displacement bound comes down within one epoch", "[deform][regions]") {
+  for (const Vec3& far : {Vec3(3.5, 3.5, 0.3), Vec3(-3.5, 2.0, 0.3)}) {
+    INFO("the triangle starts at " << far.transpose());
+    // z = 0 over [-4, 4]^2: about 144 regions, so the point's first neighbourhood is a list
+    // (not every region), and the triangle's region lies beyond it.
+    Mesh mesh = scenes::gridPlane(48, 8.0);
+    const VertexIndex base = static_cast<VertexIndex>(mesh.positions.size());
+    mesh.positions.push_back(far + Vec3(-0.01, -0.01, 0));
+    mesh.positions.push_back(far + Vec3(0.01, -0.01, 0));
+    mesh.positions.push_back(far + Vec3(0, 0.01, 0));
+    mesh.triangles.push_back({base, base + 1, base + 2});
+    std::vector<double> bounds(mesh.positions.size(), 0.0);
+    for (VertexIndex v = base; v < base + 3; ++v) bounds[v] = 6.0;  // it may go anywhere near the plane
+    const auto h = Hierarchy::build(mesh);
+    DeformingBody body(h);
+    body.inflate(bounds);
+    REQUIRE(body.geometry().regions);
+    QueryStream stream(h);
+    stream.setGeometry(&body.geometry());
+    const Vec3 p(0.01, 0.02, 0.05);
+    CoherentState state;
+    std::vector<Vec3> x = mesh.positions;
+    int wrong = 0, certified_steps = 0;
+    bool reached = false;
+    for (int step = 0; step < 60; ++step) {
+      if (step >= 10) reached |= moveTriangleToward(x, base, p + Vec3(0, 0, -0.03), 0.25);  // to 0.03 below p
+      REQUIRE(body.setPositions(x).accepted);  // within the bounds: one epoch throughout
+      Mesh current = mesh;
+      current.positions = x;
+      const Vec3 q = p;  // a still point: its set stays certified while nothing near it moves
+      bool certified = false;
+      const ClosestPoint got = stream.closestCoherent(q, state, &certified);
+      certified_steps += certified;
+      const BruteHit truth = bruteForceClosest(current, q);
+      const bool ok = std::abs(got.distance - truth.distance) <= 1e-12 * truth.distance && got.triangle == truth.triangle;
+      if (!ok && ++wrong <= 3)
+        UNSCOPED_INFO("step " << step << ": got " << got.distance << " (triangle " << got.triangle << "), brute force "
+                              << truth.distance << " (triangle " << truth.triangle << ")");
+    }
+    CHECK(reached);
+    CHECK(certified_steps > 5);  // certified while the triangle was far
+    CHECK(wrong == 0);
+  }
+}
+
 TEST_CASE("drift by region: uniform motion takes the largest, local motion the regions", "[deform][regions]") {
   const Mesh mesh = scenes::icosphere(4, 1.0);
   const auto h = Hierarchy::build(mesh);
@@ -1565,4 +1727,57 @@ TEST_CASE("unused vertices far away do not count in a body's extent", "[deform][
   CHECK_THROWS_WITH(loose.setPositions(wide), Catch::Contains("supported mesh size"));
   CHECK_THROWS_WITH(loose.anchor(wide), Catch::Contains("supported mesh size"));
   CHECK_THROWS_WITH(KeyframeBody(h, {mesh.positions, wide}), Catch::Contains("supported mesh size"));
+}
+
+// A vertex no face uses moves nothing a query reads, so its motion is no drift. Found by an
+// audit: such a vertex jumping by 2e100 each step (a deforming body), or still at 1e100 and
+// moved 1e84 by the interpolation's rounding (key frames), kept every certificate from holding.
+// A point held still above the moving surface is certified as when the vertex is absent, and
+// every answer equals a fresh search.
+TEST_CASE("unused vertices far away do not count in a body's drift", "[deform][inflated][keyframe]") {
+  Mesh mesh = scenes::icosphere(3);
+  mesh.positions.emplace_back(1e100, 0, 0);  // used by no face
+  const auto h = Hierarchy::build(mesh);
+  const size_t n = mesh.positions.size();
+  const Vec3 p = 1.01 * mesh.positions[100];
+  const auto run = [&](const TreeGeometry& geometry, const std::function<void(int)>& move) {
+    QueryStream stream(h), fresh(h);
+    stream.setGeometry(&geometry);
+    fresh.setGeometry(&geometry);
+    CoherentState state;
+    size_t certified = 0;
+    Failures failures("an unused vertex far away");
+    for (int i = 0; i < 200; ++i) {
+      move(i);
+      bool c = false;
+      const ClosestPoint got = stream.closestCoherent(p, state, &c);
+      certified += c;
+      const ClosestPoint want = fresh.closest(p);
+      failures.check(got.triangle == want.triangle && got.distance == want.distance,
+                     [&] { return "step " + std::to_string(i) + ": " + num(got.distance) + " against " + num(want.distance); });
+    }
+    return certified;
+  };
+  std::vector<Vec3> shifted = mesh.positions;
+  for (size_t v = 0; v + 1 < n; ++v) shifted[v] += Vec3(1e-3, 0, 0);
+  for (const bool still : {true, false}) {
+    INFO((still ? "key frames, the unused vertex still" : "key frames, the unused vertex moving by 2e100"));
+    std::vector<Vec3> last = shifted;
+    if (!still) last.back() = Vec3(-1e100, 0, 0);
+    KeyframeBody frames(h, {mesh.positions, last});
+    CHECK(run(frames.geometry(), [&](int i) { frames.setTime(i * 5e-3); }) > 180);
+  }
+  {
+    INFO("a deforming body, the unused vertex jumping by 2e100");
+    DeformingBody body(h);
+    std::vector<double> bounds(n, 0.01);
+    bounds.back() = 1e101;
+    body.inflate(bounds);
+    CHECK(run(body.geometry(), [&](int i) {
+            std::vector<Vec3> x = mesh.positions;
+            for (size_t v = 0; v + 1 < n; ++v) x[v] += Vec3(1e-6 * i, 0, 0);
+            x.back() = Vec3(i % 2 ? 1e100 : -1e100, 0, 0);
+            REQUIRE(body.setPositions(x).accepted);
+          }) > 180);
+  }
 }
