@@ -792,12 +792,17 @@ void trackMotion(CoherentState& state, const Vec3& p, const TreeGeometry& g) {
   const double drift = followedDrift(state, g, local);
   // A switch between the two drifts (a new epoch) counts the point's step only, once.
   const double step = point_step.norm() + (local == state.last_local ? drift - state.last_drift : 0.0);
-  const Eigen::Vector3f velocity = point_step.cast<float>();
+  // A step counts for at most a thousand rest sizes (a jump, not a motion to follow), and
+  // stays in float: one jump of 1e39 (query points go to 1e153) left the means at +inf for
+  // good, every later query gathering afresh (found by an audit).
+  const double limit = std::min(1e37, 2e3 / g.box_scale);
+  const Eigen::Vector3f velocity = point_step.cwiseMax(-limit).cwiseMin(limit).cast<float>();
+  const float step_f = static_cast<float>(std::min(step, limit));
   if (state.mean_step > 0) {
-    state.mean_step = 0.9f * state.mean_step + 0.1f * static_cast<float>(step);
+    state.mean_step = 0.9f * state.mean_step + 0.1f * step_f;
     state.mean_velocity = 0.9f * state.mean_velocity + 0.1f * velocity;
   } else {
-    state.mean_step = static_cast<float>(step);
+    state.mean_step = step_f;
     state.mean_velocity = velocity;
   }
 }

@@ -607,6 +607,47 @@ TEST_CASE("coherent queries: a point too fast for its sets", "[coherent]") {
   CHECK(c.searched > 200);
 }
 
+// One jump far away (1e40: query points go to 1e153) and back. Found by an audit: the state's
+// running mean step, a float, became +inf for good and every later query gathered afresh. The
+// jump now counts for at most a thousand rest sizes: the mean decays, and the sets certify again
+// as often as a state that never jumped. Every answer exact.
+TEST_CASE("coherent queries: a state recovers from a jump past the float range", "[coherent]") {
+  const Mesh mesh = scenes::torus(1.0, 0.3, 96, 48);
+  const auto h = Hierarchy::build(mesh);
+  const Checker checker{mesh, meshDiagonal(mesh)};
+  QueryStream stream(h);
+  CoherentState jumped, steady;
+  Failures f("closestCoherent after a jump to 1e40");
+  const auto at = [](int i) {
+    const double angle = 0.002 * i;
+    return Vec3(1.32 * std::cos(angle), 1.32 * std::sin(angle), 0.05);
+  };
+  for (int i = 0; i < 10; ++i) {
+    stream.closestCoherent(at(i), jumped);
+    stream.closestCoherent(at(i), steady);
+  }
+  const Vec3 far(1e40, 0, 0);
+  checker.exact(stream.closestCoherent(far, jumped), far, Truth{bruteForceKClosest(mesh, far, 1)}, f);
+  size_t certified_jumped = 0, certified_steady = 0;
+  for (int i = 10; i < 400; ++i) {
+    const Vec3 p = at(i);
+    bool a = false, b = false;
+    const ClosestPoint r = stream.closestCoherent(p, jumped, &a);
+    stream.closestCoherent(p, steady, &b);
+    if (i % 10 == 0) checker.exact(r, p, Truth{bruteForceKClosest(mesh, p, 1)}, f);
+    if (i >= 300) {
+      certified_jumped += a;
+      certified_steady += b;
+    }
+  }
+  INFO("certified over the last 100 steps: " << certified_jumped << " after the jump, " << certified_steady
+                                             << " without; mean step " << jumped.mean_step);
+  CHECK(std::isfinite(jumped.mean_step));
+  CHECK(jumped.mean_step < 0.01f);
+  CHECK(certified_steady > 80);
+  CHECK(certified_jumped + 5 >= certified_steady);
+}
+
 // A cold state's first set is gathered before the point's motion is known (the least margin):
 // when it fails at the next step, that says nothing about the motion, so the state gathers a
 // set with the measured motion at once instead of waiting six steps, and that set certifies the
