@@ -60,14 +60,18 @@ struct CoherenceCounters {
   uint64_t certified = 0;       // answered from the cached candidate set
   uint64_t rebuilds = 0;        // candidate set rebuilt (a depth-first query)
   uint64_t searched = 0;        // closestCoherent(p) backing off: a depth-first query, no set
-                                // (certified + rebuilds + searched = its queries)
+                                // (certified + rebuilds + searched = its queries, but for
+                                // points not finite or beyond 1e153: answered without a
+                                // search, they count in steps only)
   uint64_t candidates = 0;      // candidate faces gathered over all rebuilds
   uint64_t front_resets = 0;    // dynamic front restarted from the roots
   uint64_t recomputed = 0;      // stale front entries recomputed
 };
 
 // Compact coherent state of one moving point against one mesh (a cloth vertex against a body):
-// zero-initialised (default-constructed) means a cold start. Used with
+// a default-constructed state (or `CoherentState{}`) means a cold start. A memset to zero is
+// not one: its tunings (reach_steps, lead_steps) read 0, and a state with reach_steps 0 never
+// gathers a set (it answers exactly, by plain searches). Used with
 // QueryStream::closestCoherent(p, state, ...), where the stream lends its scratch memory; the
 // state keeps only the certificate: an anchor, a reach and up to kCoherentSetSize candidate
 // faces sorted by distance from the anchor, tested eight at a time. The anchor is the point
@@ -173,7 +177,8 @@ class QueryStream {
   // previous face warm-starts the search.
   // With max_distance finite the question is "the closest face within max_distance": the same
   // answer as closest() when that is within max_distance (up to a relative 1e-12 and 1e-15 of
-  // the mesh's size: the rounding of a computed distance), else no face
+  // the rest mesh's size, the hierarchy's: the rounding of a computed distance; a deforming or
+  // key-framed body far smaller than its rest mesh keeps that absolute slack), else no face
   // (triangle kInvalidIndex, distance +infinity), found or certified without looking farther.
   // A negative or NaN max_distance counts as 0: only a face the point lies on (distance 0, up
   // to that rounding) is an answer; lower is then 0.
