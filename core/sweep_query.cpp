@@ -314,6 +314,7 @@ void QueryStream::reset() {
   mean_step_ = 0;
   closest_wait_ = closest_backoff_ = set_steps_ = 0;
   set_unmeasured_ = false;
+  body_state_ = CoherentState{};
   front_.clear();
 }
 
@@ -585,6 +586,20 @@ constexpr uint8_t kPayingSteps = 2, kClosestWait = 6, kMaxWait = 24;
 
 ClosestPoint QueryStream::closestCoherent(const Vec3& p) {
   const TreeGeometry& g = geometry();
+  if (geometry_ != nullptr && inCoordinateRange(p, kMaxQueryCoordinate)) {  // a body's geometry
+    ++coherence_.steps;
+    bool certified = false;
+    const ClosestPoint c = closestCoherent(p, body_state_, &certified);
+    if (certified) {
+      ++coherence_.certified;
+    } else if (body_state_.has_set) {
+      ++coherence_.rebuilds;
+      coherence_.candidates += body_state_.count;
+    } else {
+      ++coherence_.searched;
+    }
+    return c;
+  }
   if (!inCoordinateRange(p, kMaxQueryCoordinate)) {
     counters_ = {};
     ++coherence_.steps;

@@ -167,7 +167,11 @@ class QueryStream {
 
   // Exact closest point for a point that moves a little between calls (a path): answered from
   // a cached candidate set while its certificate holds, else by a warm-started depth-first
-  // query that rebuilds the set. Same answers as closest().
+  // query that rebuilds the set. Same answers as closest(). On a body's geometry
+  // (setGeometry: key frames, a deforming body), whose every change is a new version, the
+  // stream keeps a CoherentState of its own and answers as closestCoherent(p, state): its set
+  // survives the changes within a lineage (found by an audit: the stream's set, copied faces,
+  // held for one version only, and every query searched afresh).
   ClosestPoint closestCoherent(const Vec3& p);
 
   // The same for a caller-held compact state (one per moving point and mesh); this stream only
@@ -307,6 +311,7 @@ class QueryStream {
   // and set_unmeasured: after a set that failed within two tests, plain searches for a while.
   uint8_t closest_wait_ = 0, closest_backoff_ = 0, set_steps_ = 0;
   bool set_unmeasured_ = false;
+  CoherentState body_state_;  // closestCoherent(p) on a body's geometry
   // Dynamic front (closestWithinCoherent, kClosestCoherent).
   std::vector<DriftEntry> front_;
   std::vector<DriftEntry> popped_;

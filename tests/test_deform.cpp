@@ -1286,6 +1286,46 @@ TEST_CASE("deform: a stationary coherent point is certified", "[deform]") {
   CHECK(stream.coherence().certified == 10);
 }
 
+// The stream's own closestCoherent(p) on a body's geometry, whose every change is a new
+// version: it keeps a CoherentState of its own, so its set survives the changes of a lineage.
+// Found by an audit: it certified nothing there and cost more than closest(). Along a slow path
+// over a slowly deforming torus (a DeformingBody, key frames) most queries are certified, the
+// counters add up, and every answer equals a fresh search.
+TEST_CASE("deform: the stream's closestCoherent(p) keeps its set while a body deforms", "[deform]") {
+  const Mesh m = scenes::torus(1.0, 0.3, 48, 24);
+  const auto h = Hierarchy::build(m);
+  const auto wave = [&](double t) {
+    std::vector<Vec3> x = m.positions;
+    for (Vec3& v : x) v.z() += 0.002 * std::sin(3 * v.x() + t);
+    return x;
+  };
+  DeformingBody deforming(h);
+  deforming.inflate(0.01);
+  KeyframeBody keyframed(h, {m.positions, wave(0), wave(1)});
+  for (const bool key : {false, true}) {
+    INFO((key ? "key frames" : "a deforming body"));
+    QueryStream stream(h), fresh(h);
+    const TreeGeometry& geometry = key ? keyframed.geometry() : deforming.geometry();
+    stream.setGeometry(&geometry);
+    fresh.setGeometry(&geometry);
+    Failures failures("closestCoherent(p) on a moving body");
+    for (int i = 0; i < 300; ++i) {
+      if (key) keyframed.setTime(i / 150.0);
+      else REQUIRE(deforming.setPositions(wave(0.01 * i)).accepted);
+      const double angle = 0.001 * i;
+      const Vec3 p(1.35 * std::cos(angle), 1.35 * std::sin(angle), 0.05);
+      const ClosestPoint got = stream.closestCoherent(p), want = fresh.closest(p);
+      failures.check(got.triangle == want.triangle && got.distance == want.distance,
+                     [&] { return "step " + std::to_string(i) + ": " + num(got.distance) + " against " + num(want.distance); });
+    }
+    const CoherenceCounters& c = stream.coherence();
+    INFO("certified " << c.certified << ", rebuilds " << c.rebuilds << ", searched " << c.searched);
+    CHECK(c.steps == 300);
+    CHECK(c.certified + c.rebuilds + c.searched == 300);
+    CHECK(c.certified > 240);
+  }
+}
+
 // ---- Drift by region ------------------------------------------------------------------------
 
 namespace {
