@@ -65,6 +65,15 @@ KeyframeBody::KeyframeBody(std::shared_ptr<const Hierarchy> hierarchy,
   positions_ = frames_[0];
   const std::vector<TriangleIndex>& vertex_face = h.vertexFace();
   unused_vertices_ = std::find(vertex_face.begin(), vertex_face.end(), kInvalidIndex) != vertex_face.end();
+  // The rounding of an interpolated position, (1 - s) a + s b in world coordinates: a few ulps
+  // of the largest coordinate a face uses, in every frame. It moves a vertex and a triangle's
+  // corners, so the radii carry it twice over (found by an audit: key frames at 1e12 left eps
+  // below a computed vertex's distance).
+  double largest = 0;
+  for (const auto& frame : frames_)
+    for (size_t v = 0; v < n; ++v)
+      if (vertex_face[v] != kInvalidIndex) largest = std::max(largest, frame[v].cwiseAbs().maxCoeff());
+  interpolation_rounding_ = 16 * 0x1p-53 * largest;
   geometry_.hierarchy = hierarchy_.get();
   geometry_.nodes = nodes_.data();
   geometry_.leaf_blocks = nullptr;  // faces are gathered from the interpolated positions
@@ -94,14 +103,18 @@ void KeyframeBody::interpolatedBounds(double t, std::vector<Node8>& out_nodes) c
   const std::vector<SlotBoxes>& box_a = frame_boxes_[f];
   const std::vector<SlotBoxes>& box_b = frame_boxes_[last == 0 ? 0 : f + 1];
   const double wr = 1 - s;
+  const double world_magnitude = hierarchy_->center().cwiseAbs().maxCoeff() * hierarchy_->boxScale();
   for (size_t node = 0; node < out_nodes.size(); ++node) {
     Node8& out = out_nodes[node];
     const Node8& na = a[node];
     const Node8& nb = b[node];
     // In scaled double coordinates, packed again: its slack covers this arithmetic (relative
     // 2^-53 of the frames' coordinates, `magnitude`).
+    // The positions are interpolated in world coordinates: their rounding is relative to the
+    // mesh's distance from the world origin too (found by an audit: key frames at 1e10 left
+    // the computed positions an ulp outside the boxes), so the centre's scaled magnitude counts.
     SlotBoxes boxes = emptySlotBoxes();  // empty slots stay empty (0 * inf is NaN)
-    double magnitude = 0;
+    double magnitude = world_magnitude;
     for (int k = 0; k < 8; ++k) {
       if (na.child[k] == kEmptyChild) continue;
       for (int axis = 0; axis < 3; ++axis) {
@@ -123,7 +136,7 @@ void KeyframeBody::interpolatedBounds(double t, std::vector<Node8>& out_nodes) c
     for (int k = 0; k < 8; ++k) {
       const double from_a = s == 0 ? na.eps[k] : na.eps[k] + s * delta[k];  // delta may be inf
       const double from_b = wr == 0 ? nb.eps[k] : nb.eps[k] + wr * delta[k];
-      out.eps[k] = floatAtLeast(std::min(from_a, from_b));
+      out.eps[k] = floatAtLeast(std::min(from_a, from_b) + interpolation_rounding_);
     }
   }
 }

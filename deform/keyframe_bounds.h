@@ -54,6 +54,7 @@ class KeyframeBody {
   TreeGeometry geometry_;
   double time_ = 0;
   bool unused_vertices_ = false;  // some vertex no face uses (its motion is no drift)
+  double interpolation_rounding_ = 0;  // added to the radii between frames (constructor)
 };
 
 }  // namespace meshsweeper

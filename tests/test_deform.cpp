@@ -1006,6 +1006,28 @@ TEST_CASE("key frames and deforming bodies past the float range of the rest mesh
   }
 }
 
+// Key frames far from the world origin: positions are interpolated in world coordinates, so
+// their rounding is an ulp of 1e12 while the mesh is of size 2. Found by an audit: the boxes
+// and the radii then missed the computed positions by that; both now carry it.
+TEST_CASE("key frames far from the world origin bound their computed positions", "[deform][keyframe]") {
+  Random random(12);
+  for (double offset : {1e10, 1e12}) {
+    Mesh mesh = scenes::icosphere(3);
+    for (Vec3& v : mesh.positions) v += Vec3(offset, 0.7 * offset, -0.3 * offset);
+    const auto h = Hierarchy::build(mesh);
+    std::vector<Vec3> noisy = mesh.positions;
+    for (Vec3& v : noisy) v += 0.3 * randomUnit(random);
+    KeyframeBody body(h, {mesh.positions, noisy});
+    size_t bad = 0;
+    for (int i = 0; i < 300; ++i) {
+      body.setTime(random.uniform(0.5, 1.0));
+      const std::string problem = validateGeometry(*h, body.geometry());
+      if (!problem.empty() && ++bad <= 3) UNSCOPED_INFO("offset " << offset << ", t = " << num(body.time()) << ": " << problem);
+    }
+    CHECK(bad == 0);
+  }
+}
+
 TEST_CASE("key frames: bad frames throw", "[deform][keyframe]") {
   const Mesh mesh = scenes::icosphere(2);
   const auto h = Hierarchy::build(mesh);
