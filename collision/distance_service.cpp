@@ -676,8 +676,9 @@ struct DistanceService::Impl {
   }
 
   // How far from the surface a computed distance at q (the point p in the body's frame) can
-  // be made of rounding alone: 16 eps times the coordinates involved (and, for a rigid body,
-  // those of p and of the pose's translation, whose difference q carries). A point exactly on
+  // be made of rounding alone: 16 eps times the coordinates involved (and, for a rigid body or
+  // a deforming body in a followed frame, those of p and of the frame's translation, whose
+  // difference q carries). A point exactly on
   // a face is answered 1e-17 away at coordinates of 0.5, say, with a closest point one ulp
   // aside. A hit this close is on the surface: it counts as within any max_distance, and its
   // direction and sign come from its feature's pseudonormal, not from that offset.
@@ -755,7 +756,7 @@ struct DistanceService::Impl {
   // s.candidate_begin[j] to [j + 1]); statuses written. With `closest_only` (closest mode) a
   // body whose box lies farther than the farthest point of another candidate's box is left
   // out: that box holds a surface point nearer than anything the first can hold.
-  void blockCandidates(Scratch& s, const PointsRef& points, size_t first, uint32_t count, double d,
+  void blockCandidates(Scratch& s, const PointRows& points, size_t first, uint32_t count, double d,
                        bool closest_only, StepResult& out, StepStats& stats) {
     s.found.resize(std::max<size_t>(1, broadphase.liveCount()));
     s.candidates.clear();
@@ -870,7 +871,7 @@ struct DistanceService::Impl {
     StepStats& stats;
     BlockStates& states;
   };
-  BlockWork beginBlock(size_t block, const PointsRef& points, double d, bool closest_only, StepResult& out) {
+  BlockWork beginBlock(size_t block, const PointRows& points, double d, bool closest_only, StepResult& out) {
     Scratch& s = localScratch();
     const size_t first = block * options.block_size;
     const uint32_t count = static_cast<uint32_t>(std::min<size_t>(options.block_size, points.rows() - first));
@@ -879,7 +880,7 @@ struct DistanceService::Impl {
     return {s, first, count, stats, alignStates(s, block, count)};
   }
 
-  void closestBlock(size_t block, const PointsRef& points, double d, StepResult& out) {
+  void closestBlock(size_t block, const PointRows& points, double d, StepResult& out) {
     auto&& [s, first, count, stats, states] = beginBlock(block, points, d, true, out);
 
     // Two passes: the queries, then the hits. A hit's pseudonormal is a table lookup that
@@ -961,7 +962,7 @@ struct DistanceService::Impl {
     runs.clear();
   }
 
-  void withinBlock(size_t block, const PointsRef& points, double d, StepResult& out) {
+  void withinBlock(size_t block, const PointRows& points, double d, StepResult& out) {
     auto&& [s, first, count, stats, states] = beginBlock(block, points, d, false, out);
     std::vector<DistanceHit>& hits = block_hits[block];
     hits.clear();
@@ -1147,8 +1148,9 @@ void DistanceService::setTime(BodyHandle body, double t) {
   b.box_dirty = true;
 }
 
-PositionsUpdate DistanceService::setPositions(BodyHandle body, PointsRef positions) {
+PositionsUpdate DistanceService::setPositions(BodyHandle body, const PointsRef& points) {
   impl_->body(body, "setPositions", BodyKind::kDeforming);
+  const PointRows& positions = points.matrix();
   std::vector<Vec3>& v = impl_->positions_scratch;
   v.resize(static_cast<size_t>(positions.rows()));
   for (Eigen::Index i = 0; i < positions.rows(); ++i) v[i] = positions.row(i).transpose();
@@ -1283,13 +1285,20 @@ Box3 DistanceService::worldBox(BodyHandle body) {
 
 // ---- Queries --------------------------------------------------------------------------------
 
-StepResult DistanceService::step(PointsRef points, double max_distance, QueryMode mode) {
+Eigen::Index PointsRef::requireThreeColumns(Eigen::Index columns) {
+  if (columns != 3)
+    throw std::invalid_argument("meshsweeper: points and positions need 3 columns (x, y, z), got " +
+                                std::to_string(columns));
+  return columns;
+}
+
+StepResult DistanceService::step(const PointsRef& points, double max_distance, QueryMode mode) {
   StepResult out;
   step(points, max_distance, mode, out);
   return out;
 }
 
-void DistanceService::step(PointsRef points, double max_distance, QueryMode mode, StepResult& out) {
+void DistanceService::step(const PointsRef& points, double max_distance, QueryMode mode, StepResult& out) {
   if (std::isnan(max_distance) || max_distance < 0)
     throw std::invalid_argument("DistanceService::step: max_distance must be >= 0 (got " +
                                 numberText(max_distance) + ")");
@@ -1298,7 +1307,7 @@ void DistanceService::step(PointsRef points, double max_distance, QueryMode mode
                                 std::to_string(static_cast<int>(mode)));
   Impl& m = *impl_;
   try {
-    stepInto(points, max_distance, mode, out);
+    stepInto(points.matrix(), max_distance, mode, out);
   } catch (...) {
     // Out of memory (or a thread's exception): the result is left empty, not half-written (a
     // within step's hits are swapped out while it runs, found by review), and a removed body's
@@ -1309,7 +1318,7 @@ void DistanceService::step(PointsRef points, double max_distance, QueryMode mode
   m.removed_states = false;  // this step's alignStates() dropped them (see remove())
 }
 
-void DistanceService::stepInto(PointsRef points, double max_distance, QueryMode mode, StepResult& out) {
+void DistanceService::stepInto(const PointRows& points, double max_distance, QueryMode mode, StepResult& out) {
   Impl& m = *impl_;
   auto start = std::chrono::steady_clock::now();
   const uint32_t refreshed = m.refreshBoxes();

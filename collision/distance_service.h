@@ -45,7 +45,33 @@ namespace meshsweeper {
 
 // Query points and positions: one row (x, y, z) per point.
 using PointMatrix = Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor>;
-using PointsRef = Eigen::Ref<const PointMatrix>;
+using PointRows = Eigen::Ref<const PointMatrix>;
+
+// The points (or positions) a call reads: any Eigen matrix or expression of doubles with three
+// columns, one row (x, y, z) per point. A PointMatrix or a row-major map with three columns is
+// read in place; any other layout (a column-major Eigen::MatrixXd, a block) is copied once for
+// the call. A matrix whose column count is fixed at another number does not compile; a dynamic
+// one (Eigen::MatrixXd) with another count throws std::invalid_argument before the call does
+// anything (Eigen::Ref alone does not check it in a release build: a MatrixXd of 2 columns was
+// read past its end, found by an audit). It is a view for the call's duration, not to be kept.
+class PointsRef {
+ public:
+  template <typename Derived>
+  PointsRef(const Eigen::DenseBase<Derived>& points)  // NOLINT(google-explicit-constructor): like Eigen::Ref
+      : matrix_((requireThreeColumns(points.cols()), points.derived())) {
+    static_assert(Derived::ColsAtCompileTime == Eigen::Dynamic || Derived::ColsAtCompileTime == 3,
+                  "points and positions need three columns (x, y, z)");
+  }
+  // Not copyable: the view may hold the copy it made, which a copy of Eigen::Ref would not own.
+  PointsRef(const PointsRef&) = delete;
+  PointsRef& operator=(const PointsRef&) = delete;
+
+  const PointRows& matrix() const { return matrix_; }
+
+ private:
+  static Eigen::Index requireThreeColumns(Eigen::Index columns);  // throws unless 3
+  PointRows matrix_;
+};
 
 // A body of a DistanceService: slot index, generation and the service's own number. A handle
 // stays valid until its body is removed; after that every use throws std::invalid_argument
@@ -95,7 +121,8 @@ struct DistanceHit {
   Vec3 point = Vec3::Zero();               // closest point on the body's surface
   Vec3 barycentric = Vec3::Zero();         // point = b0*A + b1*B + b2*C of the triangle
   // Unit vector from `point` to the query point. On the surface (a distance of at most 16 eps
-  // times the coordinates involved, which rounding alone can make of a point lying exactly on
+  // times the coordinates involved, the query point's and the frame's translation's included
+  // for a rigid body or a framed deforming one, which rounding alone can make of a point lying exactly on
   // a face: the offset's direction is noise there), the feature's pseudonormal (outward for a
   // closed body, whose sign is then kOutside), normalised; the zero vector only if that
   // pseudonormal is zero (a feature whose faces all have zero area).
@@ -284,7 +311,7 @@ class DistanceService {
   void setTime(BodyHandle body, double t);
   // kDeforming: one position per mesh vertex (std::invalid_argument on a wrong count or a
   // non-finite coordinate; the body is then unchanged).
-  PositionsUpdate setPositions(BodyHandle body, PointsRef positions);
+  PositionsUpdate setPositions(BodyHandle body, const PointsRef& positions);
   PositionsUpdate setPositions(BodyHandle body, const std::vector<Vec3>& positions);
   // kDeforming, several bodies at once: the same as setPositions(b.body, *b.positions) for
   // each entry (result i for entry i), the bodies updated in parallel on the service's threads.
@@ -314,10 +341,12 @@ class DistanceService {
   // within the distance; a hit on the surface up to rounding (see DistanceHit::direction)
   // counts as within any max_distance, 0 included, with its distance as computed. Points with a NaN or infinite coordinate get PointStatus::kNotFinite,
   // finite ones beyond 1e150 kOutOfRange, and no hits (the step goes on). Throws std::invalid_argument if max_distance is NaN or negative.
-  // Results are written into `out` (its memory reused); if the step throws (out of memory), `out`
-  // is left empty (size() 0, its memory released); the service stays usable and the next step answers exactly.
-  void step(PointsRef points, double max_distance, QueryMode mode, StepResult& out);
-  StepResult step(PointsRef points, double max_distance, QueryMode mode = QueryMode::kClosest);
+  // Results are written into `out` (its memory reused). A step refused for its arguments
+  // (max_distance, mode, the points' columns) throws before it starts: `out` and the service
+  // are as they were. If a running step throws (out of memory), `out` is left empty (size() 0,
+  // its memory released); the service stays usable and the next step answers exactly.
+  void step(const PointsRef& points, double max_distance, QueryMode mode, StepResult& out);
+  StepResult step(const PointsRef& points, double max_distance, QueryMode mode = QueryMode::kClosest);
 
   // Threads used by step(): 0 = TBB's default; at most 65536 (std::invalid_argument beyond,
   // the service unchanged; ServiceOptions::threads too). Results do not depend on it.
@@ -342,7 +371,7 @@ class DistanceService {
  private:
   struct Impl;
   std::unique_ptr<Impl> impl_;
-  void stepInto(PointsRef points, double max_distance, QueryMode mode, StepResult& out);
+  void stepInto(const PointRows& points, double max_distance, QueryMode mode, StepResult& out);
 };
 
 }  // namespace meshsweeper

@@ -1505,11 +1505,61 @@ TEST_CASE("bad input: NaN points, stale handles, wrong sizes, wrong kinds", "[se
     }
     CHECK_THROWS_WITH(DistanceService(ServiceOptions{1, 0}), Catch::Contains("block_size"));
   }
+  // Found by an audit: a MatrixXd of 2 columns was read past its end (Eigen::Ref does not check
+  // a dynamic column count in a release build), one of 4 silently read as its first three.
+  SECTION("points and positions with other than 3 columns are refused; any 3-column layout is read") {
+    for (Eigen::Index columns : {0, 1, 2, 4, 6}) {
+      INFO("columns " << columns);
+      const Eigen::MatrixXd points = Eigen::MatrixXd::Constant(5, columns, 1.25);
+      CHECK_THROWS_WITH(service.step(points, 0.5), Catch::Contains("need 3 columns") && Catch::Contains("got " + std::to_string(columns)));
+      StepResult out;
+      CHECK_THROWS_AS(service.step(points, 0.5, QueryMode::kWithin, out), std::invalid_argument);
+      const Eigen::MatrixXd positions =
+          Eigen::MatrixXd::Constant(static_cast<Eigen::Index>(sphere.positions.size()), columns, 0.5);
+      CHECK_THROWS_WITH(service.setPositions(deforming, positions), Catch::Contains("need 3 columns"));
+      CHECK(service.positions(deforming) == sphere.positions);
+    }
+    // Column-major, a block of a wider matrix, and a transposed 3 x N: the same answers as rows.
+    PointMatrix rows(6, 3);
+    for (int i = 0; i < 6; ++i) rows.row(i) << 0.3 * i - 0.7, 0.9 - 0.2 * i, 0.1 * i;
+    const Eigen::MatrixXd column_major = rows;
+    Eigen::MatrixXd wide = Eigen::MatrixXd::Constant(6, 5, nan);
+    wide.middleCols(1, 3) = rows;
+    const Eigen::Matrix<double, 3, Eigen::Dynamic> transposed = rows.transpose();
+    const StepResult expected = service.step(rows, 2.0, QueryMode::kWithin);
+    for (const StepResult& r : {service.step(column_major, 2.0, QueryMode::kWithin),
+                                service.step(wide.middleCols(1, 3), 2.0, QueryMode::kWithin),
+                                service.step(transposed.transpose(), 2.0, QueryMode::kWithin)}) {
+      REQUIRE(r.size() == expected.size());
+      for (size_t i = 0; i < r.size(); ++i) {
+        REQUIRE(r.hits(i).size() == expected.hits(i).size());
+        CHECK(r.status(i) == PointStatus::kOk);
+        for (size_t k = 0; k < r.hits(i).size(); ++k) {
+          CHECK(r.hits(i)[k].triangle == expected.hits(i)[k].triangle);
+          CHECK(r.hits(i)[k].distance == expected.hits(i)[k].distance);
+        }
+      }
+    }
+    Eigen::MatrixXd moved(static_cast<Eigen::Index>(sphere.positions.size()), 3);
+    for (size_t v = 0; v < sphere.positions.size(); ++v) moved.row(static_cast<Eigen::Index>(v)) = 1.01 * sphere.positions[v].transpose();
+    service.setPositions(deforming, moved);
+    CHECK(service.positions(deforming)[5] == 1.01 * sphere.positions[5]);
+  }
   SECTION("bad max distance") {
     const PointMatrix points = PointMatrix::Zero(2, 3);
     CHECK_THROWS_AS(service.step(points, nan, QueryMode::kClosest), std::invalid_argument);
     CHECK_THROWS_AS(service.step(points, -1.0, QueryMode::kClosest), std::invalid_argument);
     CHECK(service.step(PointMatrix(0, 3), 1.0).size() == 0);
+    // A refused step leaves the caller's result as it was.
+    StepResult out;
+    service.step(points, 2.0, QueryMode::kWithin, out);
+    const size_t hits = out.hits(0).size();
+    REQUIRE(hits > 0);
+    CHECK_THROWS_AS(service.step(PointMatrix::Zero(7, 3), nan, QueryMode::kClosest, out), std::invalid_argument);
+    CHECK_THROWS_AS(service.step(Eigen::MatrixXd::Zero(7, 2), 1.0, QueryMode::kClosest, out), std::invalid_argument);
+    CHECK(out.size() == 2);
+    CHECK(out.mode() == QueryMode::kWithin);
+    CHECK(out.hits(0).size() == hits);
   }
   SECTION("stale handles are detected, never dereferenced") {
     service.remove(deforming);
