@@ -11,7 +11,8 @@
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$root"
-bash scripts/setup.sh
+# The demo needs the tool, whatever an earlier configure of the build folder chose.
+MESHSWEEPER_CMAKE_ARGS="${MESHSWEEPER_CMAKE_ARGS:-} -DMESHSWEEPER_BUILD_TOOLS=ON" bash scripts/setup.sh
 
 build_dir="${MESHSWEEPER_BUILD_DIR:-build}"
 meshsweep="$build_dir/tools/meshsweep"

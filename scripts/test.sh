@@ -4,5 +4,11 @@
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$root"
-bash scripts/setup.sh
-ctest --test-dir "${MESHSWEEPER_BUILD_DIR:-build}" --output-on-failure -j "${MESHSWEEPER_JOBS:-2}"
+# Tests and the tool are switched on whatever an earlier configure of the build folder chose
+# (CMake keeps options in its cache: a demo run with MESHSWEEPER_BUILD_TESTS=OFF left them off,
+# and CTest then ran an old list of tests that were never built, or none at all).
+MESHSWEEPER_CMAKE_ARGS="${MESHSWEEPER_CMAKE_ARGS:-} -DMESHSWEEPER_BUILD_TESTS=ON -DMESHSWEEPER_BUILD_TOOLS=ON" \
+  bash scripts/setup.sh
+# No tests found is a failure, not a pass.
+ctest --test-dir "${MESHSWEEPER_BUILD_DIR:-build}" --output-on-failure --no-tests=error \
+  -j "${MESHSWEEPER_JOBS:-2}"
