@@ -121,9 +121,12 @@ void Image::setPixel(int x, int y, const Colour& c) {
 }
 
 bool Image::depthTest(int x, int y, double depth) {
+  // Compared as stored: a double depth against its own float rounding (rounded up half the
+  // time) let a surface drawn twice win its own tie.
   float& d = depth_[static_cast<size_t>(y) * width_ + x];
-  if (!(depth < d)) return false;
-  d = static_cast<float>(depth);
+  const float f = static_cast<float>(depth);
+  if (!(f < d)) return false;
+  d = f;
   return true;
 }
 
@@ -221,8 +224,9 @@ void Image::drawDisc(const Camera& camera, const Vec3& p, double pixels, const C
       const double r2 = dx * dx + dy * dy;
       if (r2 > 1) continue;
       const double bulge = std::sqrt(1 - r2);
-      // A sphere's front surface; a flat disc sits just in front of its centre.
-      const double depth = shaded ? s.depth - world_radius * bulge : s.depth * 0.995;
+      // A sphere's front surface; a flat disc (a marker) sits just in front of its centre, and
+      // of a line drawn to it (lines: 1%), so the line does not cut it in two.
+      const double depth = shaded ? s.depth - world_radius * bulge : s.depth * 0.985;
       if (!depthTest(x, y, depth)) continue;
       if (!shaded) {
         setPixel(x, y, r2 > 0.6 ? Colour(0.1 * colour) : colour);

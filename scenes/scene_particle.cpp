@@ -53,10 +53,10 @@ std::string particleScene(const std::string& out_dir, std::FILE* log) {
                                           Vec3::UnitZ(), panel, panel, 35);
     // The front itself (the paper's refined mesh) over a pale torus: coarse slot triangles as
     // blue wireframe, the original faces the front has reached in orange.
+    // The orange faces go first: the torus's own copy of each, drawn after at the same depth,
+    // then fails the depth test everywhere (drawn the other way round, depth ties left the
+    // orange speckled with grey, found by an audit).
     const Colour pale(0.9, 0.9, 0.92), orange(1.0, 0.55, 0.1), edge(0.25, 0.3, 0.55);
-    for (const Triangle& tri : mesh.triangles)
-      view.drawTriangle(camera, mesh.positions[tri[0]], mesh.positions[tri[1]], mesh.positions[tri[2]],
-                        pale, pale, pale);
     for (const FrontTriangle& t : front) {
       if (!t.face) continue;
       const Vec3& a = mesh.positions[t.corners[0]];
@@ -64,6 +64,9 @@ std::string particleScene(const std::string& out_dir, std::FILE* log) {
       const Vec3& d = mesh.positions[t.corners[2]];
       view.drawTriangle(camera, a, b, d, orange, orange, orange);
     }
+    for (const Triangle& tri : mesh.triangles)
+      view.drawTriangle(camera, mesh.positions[tri[0]], mesh.positions[tri[1]], mesh.positions[tri[2]],
+                        pale, pale, pale);
     for (const FrontTriangle& t : front) {
       if (t.face) continue;
       const Vec3& a = mesh.positions[t.corners[0]];

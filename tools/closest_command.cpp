@@ -47,7 +47,7 @@ const char kClosestHelp[] =
     "A one-line JSON summary goes to standard error:\n"
     "  {\"mesh\": ..., \"vertices\": ..., \"triangles\": ..., \"points\": ..., \"rows\": ...,\n"
     "   \"build_seconds\": ..., \"query_seconds\": ..., \"mode\": ..., \"path\": ...}\n"
-    "  with --path also \"certified\", \"rebuilds\", \"front_resets\" (coherence counters)\n"
+    "  with --path also \"certified\", \"rebuilds\", \"searched\", \"front_resets\" (coherence counters)\n"
     "\n"
     "Exit status: 0 success, 1 unreadable/invalid input file or unwritable output,\n"
     "2 bad command line.\n";

@@ -10,6 +10,8 @@
 #include <chrono>
 #include <cstdio>
 #include <cstring>
+#include <exception>
+#include <new>
 #include <string>
 #include <vector>
 
@@ -29,7 +31,7 @@ const char kSceneHelp[] =
     "             point and the dynamic front that found it\n"
     "  cloth      cloth points draped over a key-framed body through the distance service,\n"
     "             per-step query timings\n"
-    "  all        the three in turn\n"
+    "  all        the three in turn (a scene that fails is named, the others still run)\n"
     "\n"
     "Exit status: 0 success, 1 missing mesh data or unwritable output, 2 bad command line.\n";
 
@@ -80,15 +82,29 @@ int runScene(int argc, char** argv, int first) {
   // Before any scene runs (the hausdorff scene takes a while), so a bad DIR fails at once.
   makeDirectories(out_dir);
   for (const std::string& n : names) checkWritable(out_dir, out_dir + "/" + n + ".png");
+  // `all` goes on past a scene that fails (the hausdorff scene without its meshes, say: the
+  // other two need none), names it on standard error, and exits 1 at the end.
+  int status = kExitOk;
   for (const std::string& n : names) {
     const auto start = std::chrono::steady_clock::now();
-    const std::string path = scenes::runScene(n, out_dir, stdout);
+    std::string path;
+    try {
+      path = scenes::runScene(n, out_dir, stdout);
+    } catch (const std::bad_alloc&) {
+      throw;
+    } catch (const std::exception& e) {
+      if (names.size() == 1) throw;
+      std::fflush(stdout);
+      std::fprintf(stderr, "meshsweep: scene %s: %s\n", n.c_str(), oneLine(e.what()).c_str());
+      status = kExitInput;
+      continue;
+    }
     const double seconds =
         std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
     std::printf("scene %s: %s (%.2f s)\n", n.c_str(), oneLine(path).c_str(), seconds);
     std::fflush(stdout);
   }
-  return kExitOk;
+  return status;
 }
 
 }  // namespace meshsweeper::cli

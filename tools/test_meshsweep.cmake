@@ -276,6 +276,12 @@ check(scene_out_not_directory RC 1 ARGS scene all --out quad.off
 file(MAKE_DIRECTORY "${WORK_DIR}/scene_blocked/particle.png")
 check(scene_out_blocked RC 1 ARGS scene particle --out scene_blocked
   ERR "meshsweep: scene_blocked/particle.png: cannot open for writing" NOT_OUT "particle:")
+# `scene all` goes on past a scene that fails (the hausdorff scene without its meshes), names it
+# and exits 1; the particle and cloth scenes, which read no mesh, still write their pictures.
+check(scene_all_goes_on RC 1 COMMAND env
+  ARGS MESHSWEEPER_DATA=/nonexistent-meshsweeper-data "${MESHSWEEP}" scene all --out scene_all
+  ERR "meshsweep: scene hausdorff: /nonexistent-meshsweeper-data/armadillo.off"
+  OUT "scene particle: scene_all/particle.png" "scene cloth: scene_all/cloth.png" NOT_OUT "scene hausdorff:")
 
 # A real mesh, when scripts/fetch_data.sh has extracted them.
 if(DATA_DIR AND EXISTS "${DATA_DIR}/armadillo.off")
