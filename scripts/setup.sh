@@ -34,8 +34,9 @@ if ((${#missing[@]})); then
     say "run as root: apt-get update && apt-get install -y --no-install-recommends ${missing[*]}"
     exit 1
   fi
-  say "installing ${missing[*]}"
   log="$(mktemp)"
+  say "installing ${missing[*]}"
+  say "(apt-get update and install: a few minutes on a fresh machine; log: $log)"
   if ! { "${sudo[@]}" apt-get update &&
          "${sudo[@]}" env DEBIAN_FRONTEND=noninteractive \
            apt-get install -y --no-install-recommends "${missing[@]}"; } >"$log" 2>&1; then
