@@ -63,7 +63,8 @@ int main(int argc, char** argv) {
     for (int f = 0; f <= frames; ++f) {
       const std::vector<Vec3> positions = deformed(static_cast<double>(f) / frames);
       if (!body.setPositions(positions).accepted) {  // moved past a bound: nothing changed
-        body.anchor(positions);                      // exact bounds at the new positions ...
+        body.reanchor(positions);                    // exact bounds at the new positions (the
+                                                     // motion continues: coherent state kept) ...
         body.inflate(0.05 * diagonal);               // ... and room to move again
         ++anchors;
       }

@@ -40,10 +40,11 @@ int main(int argc, char** argv) {
       worst_difference = std::max(worst_difference, std::abs(fresh.closest(p).distance - c.distance));
     }
     const CoherenceCounters& counters = stream.coherence();
-    std::printf("%llu steps: %llu answered from the cached candidate set, %llu searches; "
-                "largest difference from a fresh query %.3g\n",
+    std::printf("%llu steps: %llu answered from the cached candidate set, %llu sets gathered anew, "
+                "%llu plain searches; largest difference from a fresh query %.3g\n",
                 static_cast<unsigned long long>(counters.steps), static_cast<unsigned long long>(counters.certified),
-                static_cast<unsigned long long>(counters.rebuilds), worst_difference);
+                static_cast<unsigned long long>(counters.rebuilds), static_cast<unsigned long long>(counters.searched),
+                worst_difference);
   } catch (const MeshError& e) {
     std::fprintf(stderr, "moving_point_example: %s\n", e.what());
     return 1;

@@ -47,7 +47,7 @@ int main(int argc, char** argv) {
     const Vec3 size = upper - lower;
 
     DistanceService service;  // threads: TBB's default; service.setThreads(n) to change
-    // One hierarchy (built once, cached by the mesh's address) for every body of this mesh.
+    // One hierarchy (built once, cached by the mesh's address and contents) for every body of this mesh.
     std::shared_ptr<const Hierarchy> hierarchy = service.hierarchyFor(mesh);
     Eigen::Isometry3d left = Eigen::Isometry3d::Identity(), right = Eigen::Isometry3d::Identity();
     left.translation() = Vec3(-0.6 * size.x(), 0, 0);
