@@ -25,8 +25,9 @@ if ! "$meshsweep" closest "$mesh" out/points.txt --out out/closest.csv 2>out/clo
   cat out/closest.json >&2
   exit 1
 fi
-echo "closest points: out/closest.csv"
+echo "== 1. closest points on $mesh: out/closest.csv; summary (also in out/closest.json):"
 cat out/closest.json
+echo "== 2. certified Hausdorff distance, refined_elephant against elephant:"
 
 # 2. Certified Hausdorff distance between the bundled elephant (5,558 triangles) and its refined
 #    version (88,928), to 1e-4 of the diagonal: summary printed, every field in
@@ -34,6 +35,8 @@ cat out/closest.json
 "$meshsweep" hausdorff data/meshes/refined_elephant.off data/meshes/elephant.off --relative 1e-4 \
   --json out/hausdorff.json --colors out/hausdorff_colors.ply
 echo "hausdorff: out/hausdorff.json, out/hausdorff_colors.ply (opens in MeshLab or ParaView)"
+echo "== 3. demo scenes (the hausdorff picture is another pair: armadillo against its own"
+echo "   simplification, built by the scene):"
 
 # 3. Scene pictures (PNG): meshsweep scene NAME writes out/scenes/NAME.png and prints its bounds
 # and timings (see README "Scenes and pictures").

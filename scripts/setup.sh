@@ -36,7 +36,7 @@ if ((${#missing[@]})); then
   fi
   log="$(mktemp)"
   say "installing ${missing[*]}"
-  say "(apt-get update and install: a few minutes on a fresh machine; log: $log)"
+  say "(apt-get update and install: a few minutes on a fresh machine; log kept if it fails)"
   if ! { "${sudo[@]}" apt-get update &&
          "${sudo[@]}" env DEBIAN_FRONTEND=noninteractive \
            apt-get install -y --no-install-recommends "${missing[@]}"; } >"$log" 2>&1; then
