@@ -10,5 +10,5 @@ cd "$root"
 MESHSWEEPER_CMAKE_ARGS="${MESHSWEEPER_CMAKE_ARGS:-} -DMESHSWEEPER_BUILD_TESTS=ON -DMESHSWEEPER_BUILD_TOOLS=ON" \
   bash scripts/setup.sh
 # No tests found is a failure, not a pass.
-ctest --test-dir "${MESHSWEEPER_BUILD_DIR:-build}" --output-on-failure --no-tests=error \
-  -j "${MESHSWEEPER_JOBS:-2}"
+cd "${MESHSWEEPER_BUILD_DIR:-build}"
+ctest --output-on-failure --no-tests=error -j "${MESHSWEEPER_JOBS:-2}"
