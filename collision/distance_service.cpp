@@ -678,10 +678,10 @@ struct DistanceService::Impl {
   // How far from the surface a computed distance at q (the point p in the body's frame) can
   // be made of rounding alone: 16 eps times the coordinates involved (and, for a rigid body or
   // a deforming body in a followed frame, those of p and of the frame's translation, whose
-  // difference q carries). A point exactly on
-  // a face is answered 1e-17 away at coordinates of 0.5, say, with a closest point one ulp
-  // aside. A hit this close is on the surface: it counts as within any max_distance, and its
-  // direction and sign come from its feature's pseudonormal, not from that offset.
+  // difference q carries). A point exactly on a face is answered 1e-17 away at coordinates of
+  // 0.5, say, with a closest point one ulp aside. A hit this close is on the surface: it counts
+  // as within any max_distance, and its direction and sign come from its feature's
+  // pseudonormal, not from that offset.
   static constexpr double kSurfaceRounding = 16 * std::numeric_limits<double>::epsilon();
   double surfaceRounding(uint32_t slot, const Vec3& p, const Vec3& q) const {
     const Body& b = bodies[slot];
