@@ -582,6 +582,20 @@ namespace {
 // searches, and these waits measured best.
 constexpr uint8_t kPayingSteps = 2, kClosestWait = 6, kMaxWait = 24;
 
+// The point's distance from a set's anchor, plus the rounding that distances computed at
+// coordinates of their magnitude carry (16 eps of the larger coordinate): the set's distances
+// from the anchor, |p - anchor| and p's own distances to the faces each carry a few eps of the
+// coordinates, which the relative margins (1e-9 of the distances) do not cover on a mesh far
+// from the origin. Without it, at 1e7 times a mesh's size from the origin, a set's test
+// skipped a block holding the lowest-index face of an exact tie, and a certificate held for a
+// face outside the set at the answer's distance (found by an audit: closestCoherent returned
+// the other face of a tie at distance 0, withinCoherent left out a face at d).
+double movedFromAnchor(const Vec3& p, const Vec3& anchor) {
+  constexpr double kCoordinateRounding = 16 * std::numeric_limits<double>::epsilon();
+  return (p - anchor).norm() +
+         kCoordinateRounding * std::max(p.cwiseAbs().maxCoeff(), anchor.cwiseAbs().maxCoeff());
+}
+
 }  // namespace
 
 ClosestPoint QueryStream::closestCoherent(const Vec3& p) {
@@ -617,7 +631,7 @@ ClosestPoint QueryStream::closestCoherent(const Vec3& p) {
   bool certified = false;
   const bool tested = has_set_ && set_version_ == g.version;
   if (tested) {
-    const double moved = (p - anchor_).norm();
+    const double moved = movedFromAnchor(p, anchor_);
     if (moved < set_reach_) {
       double best2 = kInf;
       double exact[8];
@@ -823,7 +837,7 @@ void trackMotion(CoherentState& state, const Vec3& p, const TreeGeometry& g) {
 }
 
 // How far the faces may have come toward p since the state's set was gathered: the point's
-// distance from the anchor plus the growth of the lineage's drift. With drift by region
+// distance from the anchor (movedFromAnchor) plus the growth of the lineage's drift. With drift by region
 // (storeSet attached one; `best` bounds the anchor's distance to a point q of the region's
 // box), a face was at least its gathered distance (reach, for one outside the set) from the
 // anchor, and:
@@ -836,7 +850,7 @@ void trackMotion(CoherentState& state, const Vec3& p, const TreeGeometry& g) {
 // reach, which is all the set's test and certificate need (testSet: a face that came closer
 // than that by its box alone is still beyond the reach less this motion).
 double movedSinceSet(const CoherentState& state, const Vec3& p, const TreeGeometry& g) {
-  const double step = (p - state.anchor).norm();
+  const double step = movedFromAnchor(p, state.anchor);
   const double lineage = g.drift - state.drift_at;
   const RegionDrift* regions = regionOf(state, g);
   if (!regions) return step + lineage;
@@ -949,7 +963,7 @@ ClosestPoint QueryStream::closestCoherent(const Vec3& p, CoherentState& state, b
         storeSet(anchor, gatherCandidates(anchor, anchor2, reach, kCoherentSetSize, anchor_face, true), state);
         double set2 = kInf;
         TriangleIndex set_best = kInvalidIndex;
-        answered = state.has_set && testSet(state, p, (p - anchor).norm(), within, set2, set_best);
+        answered = state.has_set && testSet(state, p, movedFromAnchor(p, anchor), within, set2, set_best);
         if (answered) face = set_best;
       }
       if (!answered) storeSet(p, gatherCandidates(p, start2, reach, kCoherentSetSize, face, true), state);
@@ -1033,7 +1047,7 @@ void QueryStream::withinCoherent(const Vec3& p, double d, CoherentState& state, 
       if (plan.ahead) {
         const Vec3 anchor = p + plan.lead;
         storeSet(anchor, gatherCandidates(anchor, 0.0, radius, kCoherentSetSize, ignored, true), state);
-        answered = state.has_set && testSetWithin(state, p, (p - anchor).norm(), d, out);
+        answered = state.has_set && testSetWithin(state, p, movedFromAnchor(p, anchor), d, out);
       }
       if (!answered) {
         ignored = kInvalidIndex;

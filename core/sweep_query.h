@@ -167,11 +167,10 @@ class QueryStream {
 
   // Exact closest point for a point that moves a little between calls (a path): answered from
   // a cached candidate set while its certificate holds, else by a warm-started depth-first
-  // query that rebuilds the set. Same answers as closest() (on a mesh farther from the origin
-  // than about 1e7 times its size, faces tied within the coordinates' rounding may come out
-  // otherwise: README, "How the hierarchy works"). On a body's geometry
-  // (setGeometry: key frames, a deforming body), whose every change is a new version, the
-  // stream keeps a CoherentState of its own and answers as closestCoherent(p, state): its set
+  // query that rebuilds the set. Same answers as closest(), bit for bit, ties included (at any
+  // distance from the origin: the set's margins count the coordinates' rounding). On a body's
+  // geometry (setGeometry: key frames, a deforming body), whose every change is a new version,
+  // the stream keeps a CoherentState of its own and answers as closestCoherent(p, state): its set
   // survives the changes within a lineage (found by an audit: the stream's set, copied faces,
   // held for one version only, and every query searched afresh).
   ClosestPoint closestCoherent(const Vec3& p);

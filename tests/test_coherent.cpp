@@ -1125,3 +1125,59 @@ TEST_CASE("coherent queries: priority queries on meshes of degenerate and duplic
   CHECK(exact_wrong == 0);
   CHECK(bracket_wrong == 0);
 }
+
+// Found by an audit: on a mesh far from the origin relative to its size, a set's test and
+// certificate were decided by margins relative to the distances (1e-9), not to the
+// coordinates, whose rounding (a few eps of them) then decides ties. On a grid of size 1 at
+// 1e14, paths along its diagonals, closestCoherent returned the other face of an exact tie at
+// distance 0 in about 1 step of 300, withinCoherent left out faces within(p, d) lists in about
+// 1 of 25. The coherent answers must equal the plain ones, bit for bit, at any offset.
+TEST_CASE("coherent queries: ties on a mesh far from the origin go as in the plain queries", "[coherent][far]") {
+  constexpr int kN = 40;
+  for (const double offset : {0.0, 1e7, 1e14}) {
+    Mesh grid;
+    grid.name = "grid at " + std::to_string(offset);
+    const Vec3 origin(offset, offset, 0);
+    for (int i = 0; i <= kN; ++i)
+      for (int j = 0; j <= kN; ++j) grid.positions.push_back(origin + Vec3(i, j, 0) / kN);
+    for (uint32_t i = 0; i < kN; ++i)
+      for (uint32_t j = 0; j < kN; ++j) {
+        const uint32_t a = i * (kN + 1) + j, b = a + 1, c = a + kN + 1, d = c + 1;
+        grid.triangles.push_back({a, b, d});  // cells split along their diagonals: exact ties
+        grid.triangles.push_back({a, d, c});
+      }
+    const auto hierarchy = Hierarchy::build(grid);
+    uint64_t seed = 11;
+    auto next = [&seed] {  // splitmix64: the same paths on every platform
+      uint64_t z = (seed += 0x9e3779b97f4a7c15ULL);
+      z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9ULL;
+      z = (z ^ (z >> 27)) * 0x94d049bb133111ebULL;
+      return z ^ (z >> 31);
+    };
+    size_t steps = 0, closest_wrong = 0, state_wrong = 0, within_wrong = 0;
+    std::vector<TriangleHit> got, expected;
+    for (int path = 0; path < 150; ++path) {
+      QueryStream coherent(hierarchy), with_state(hierarchy), plain(hierarchy);
+      CoherentState closest_state, within_state;
+      // From one grid vertex to another: the path crosses vertices, edges and diagonals.
+      const Vec3 a = grid.positions[next() % grid.positions.size()];
+      const Vec3 b = grid.positions[next() % grid.positions.size()];
+      const double d = path % 2 ? 0.0 : 0.001 * static_cast<double>(next() % 100);
+      for (int i = 0; i < 40; ++i, ++steps) {
+        const Vec3 p = (1 - i / 40.0) * a + (i / 40.0) * b;
+        const ClosestPoint truth = plain.closest(p);
+        const ClosestPoint c = coherent.closestCoherent(p);
+        closest_wrong += c.triangle != truth.triangle || c.distance != truth.distance;
+        const ClosestPoint s = with_state.closestCoherent(p, closest_state);
+        state_wrong += s.triangle != truth.triangle || s.distance != truth.distance;
+        with_state.withinCoherent(p, d, within_state, got);
+        plain.within(p, d, expected);
+        within_wrong += !sameWithin(got, expected);
+      }
+    }
+    INFO(grid.name << ": " << steps << " steps");
+    CHECK(closest_wrong == 0);
+    CHECK(state_wrong == 0);
+    CHECK(within_wrong == 0);
+  }
+}
