@@ -1451,7 +1451,7 @@ ClosestPoint QueryStream::closestWithinCoherent(const Vec3& p, double tolerance)
   if (upper_face != kInvalidIndex) hit = hitOn(upper_face, p);
   ClosestPoint out = upperAnswer(h, g.positions, upper_face != kInvalidIndex ? &hit : nullptr,
                                  upper_vertex, upper, lower_);
-  if (tolerance <= 0 && front_tie_) canonicalExact(p, out);
+  if (!(tolerance > 0) && front_tie_) canonicalExact(p, out);  // NaN is 0, as in closestWithin
   out.counters = counters_;
   return out;
 }
