@@ -120,12 +120,12 @@ struct DistanceHit {
   double signed_distance = 0;              // -distance inside a closed body, else +distance
   Vec3 point = Vec3::Zero();               // closest point on the body's surface
   Vec3 barycentric = Vec3::Zero();         // point = b0*A + b1*B + b2*C of the triangle
-  // Unit vector from `point` to the query point. On the surface (a distance of at most 16 eps
-  // times the coordinates involved, the query point's and the frame's translation's included
-  // for a rigid body or a framed deforming one, which rounding alone can make of a point lying exactly on
-  // a face: the offset's direction is noise there), the feature's pseudonormal (outward for a
-  // closed body, whose sign is then kOutside), normalised; the zero vector only if that
-  // pseudonormal is zero (a feature whose faces all have zero area).
+  // Unit vector from `point` to the query point. On the surface (a distance of at most 16 eps times
+  // the coordinates involved, the query point's and the frame's translation's included for a rigid
+  // body or a framed deforming one, which rounding alone can make of a point lying exactly on a
+  // face: the offset's direction is noise there), the feature's pseudonormal (outward for a closed
+  // body, whose sign is then kOutside), normalised; the zero vector only if that pseudonormal is
+  // zero (a feature whose faces all have zero area).
   Vec3 direction = Vec3::Zero();
 };
 
