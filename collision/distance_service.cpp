@@ -1098,6 +1098,11 @@ BodyHandle DistanceService::addDeforming(std::shared_ptr<const Hierarchy> hierar
   return impl_->add(std::move(b));
 }
 
+BodyHandle DistanceService::addDeforming(std::shared_ptr<const Hierarchy> hierarchy, double displacement_bound,
+                                         const PointsRef& positions) {
+  return addDeforming(std::move(hierarchy), displacement_bound, toPositions(positions));
+}
+
 void DistanceService::remove(BodyHandle handle) {
   Body& b = impl_->body(handle, "remove");
   const uint32_t generation = b.generation;
@@ -1148,6 +1153,13 @@ void DistanceService::setTime(BodyHandle body, double t) {
   b.box_dirty = true;
 }
 
+std::vector<Vec3> toPositions(const PointsRef& points) {
+  const PointRows& rows = points.matrix();
+  std::vector<Vec3> v(static_cast<size_t>(rows.rows()));
+  for (Eigen::Index i = 0; i < rows.rows(); ++i) v[i] = rows.row(i).transpose();
+  return v;
+}
+
 PositionsUpdate DistanceService::setPositions(BodyHandle body, const PointsRef& points) {
   impl_->body(body, "setPositions", BodyKind::kDeforming);
   const PointRows& positions = points.matrix();
@@ -1181,11 +1193,15 @@ std::vector<PositionsUpdate> DistanceService::setPositions(const std::vector<Bod
   std::vector<uint32_t> slots(batch.size());
   for (size_t i = 0; i < batch.size(); ++i) {
     Body& b = impl_->body(batch[i].body, entry(i).c_str(), BodyKind::kDeforming);
-    if (!batch[i].positions) throw error(i, ": null positions");
+    const BodyPositions::MatrixView& rows = batch[i].rows;
+    if (!batch[i].positions && !rows.given) throw error(i, ": null positions");
+    if (!batch[i].positions && rows.cols != 3)
+      throw error(i, ": positions need 3 columns (x, y, z), got " + std::to_string(rows.cols));
+    const size_t count = batch[i].positions ? batch[i].positions->size() : static_cast<size_t>(rows.rows);
     const size_t expected = b.deforming->positions().size();
-    if (batch[i].positions->size() != expected)
-      throw error(i, ": " + std::to_string(batch[i].positions->size()) + " positions, the mesh has " +
-                         std::to_string(expected) + " vertices");
+    if (count != expected)
+      throw error(i, ": " + std::to_string(count) + " positions, the mesh has " + std::to_string(expected) +
+                         " vertices");
     targets[i] = &b;
     slots[i] = batch[i].body.index;
   }
@@ -1197,6 +1213,7 @@ std::vector<PositionsUpdate> DistanceService::setPositions(const std::vector<Bod
   // The bodies commit in parallel: an entry whose positions are a batch body's own vectors
   // (positions(other) of a deforming body) would read them while that body changes them. Such
   // entries are copied first, so every entry sees the positions as they were before the call.
+  // An Eigen matrix's entry is always copied (in parallel, below), so it is safe too.
   std::vector<const std::vector<Vec3>*> inputs(batch.size());
   std::vector<const std::vector<Vec3>*> owned;
   for (const Body* t : targets) {
@@ -1206,13 +1223,14 @@ std::vector<PositionsUpdate> DistanceService::setPositions(const std::vector<Bod
   }
   const std::less<const std::vector<Vec3>*> before;  // a total order on unrelated pointers
   std::sort(owned.begin(), owned.end(), before);
-  std::vector<std::vector<Vec3>> copies;
-  copies.reserve(batch.size());
+  std::vector<std::vector<Vec3>> copies(batch.size());
   for (size_t i = 0; i < batch.size(); ++i) {
     inputs[i] = batch[i].positions;
-    if (std::binary_search(owned.begin(), owned.end(), inputs[i], before)) {
-      copies.push_back(*inputs[i]);
-      inputs[i] = &copies.back();
+    if (!inputs[i]) {
+      inputs[i] = &copies[i];
+    } else if (std::binary_search(owned.begin(), owned.end(), inputs[i], before)) {
+      copies[i] = *inputs[i];
+      inputs[i] = &copies[i];
     }
   }
   std::vector<PositionsUpdate> updates(batch.size());
@@ -1228,6 +1246,14 @@ std::vector<PositionsUpdate> DistanceService::setPositions(const std::vector<Bod
       return ok;
     };
     tbb::parallel_for(size_t{0}, batch.size(), [&](size_t i) {
+      if (!batch[i].positions) {  // an Eigen matrix's rows
+        const BodyPositions::MatrixView& m = batch[i].rows;
+        copies[i].resize(static_cast<size_t>(m.rows));
+        for (Eigen::Index v = 0; v < m.rows; ++v) {
+          const double* x = m.data + v * m.row_stride;
+          copies[i][v] = Vec3(x[0], x[m.col_stride], x[2 * m.col_stride]);
+        }
+      }
       if (!inRange(*inputs[i])) {
         problem[i] = " has a non-finite position or one beyond 1e150 in magnitude";
         return;

@@ -39,6 +39,7 @@
 #include <Eigen/Geometry>
 
 #include <memory>
+#include <type_traits>
 #include <vector>
 
 namespace meshsweeper {
@@ -72,6 +73,9 @@ class PointsRef {
   static Eigen::Index requireThreeColumns(Eigen::Index columns);  // throws unless 3
   PointRows matrix_;
 };
+
+// The rows of `points` as positions, one Vec3 per row.
+std::vector<Vec3> toPositions(const PointsRef& points);
 
 // A body of a DistanceService: slot index, generation and the service's own number. A handle
 // stays valid until its body is removed; after that every use throws std::invalid_argument
@@ -207,11 +211,48 @@ struct PositionsUpdate {
   double excess = 0;                         // reanchored: how far past its bound it was
 };
 
-// One entry of a batched setPositions(): a deforming body and its new positions (one per mesh
-// vertex; read during the call only).
+// One entry of a batched setPositions(): a deforming body and its new positions, one per mesh
+// vertex, read during the call only (the entry is a view: what it names must outlive the call).
+// The positions are either a std::vector<Vec3> ({body, &positions} or {body, positions}) or an
+// Eigen matrix of doubles with three columns and its own storage, in any layout: a PointMatrix,
+// a column-major Eigen::MatrixXd, a block of one, an Eigen::Map over the simulator's array. An
+// expression without storage (a product, a sum) does not compile, nor does a temporary matrix
+// (it would be gone before the call); a matrix whose column count is not 3 at run time is
+// refused by the call, with the entry named.
 struct BodyPositions {
+  BodyPositions() = default;
+  BodyPositions(BodyHandle body, const std::vector<Vec3>* positions) : body(body), positions(positions) {}
+  BodyPositions(BodyHandle body, const std::vector<Vec3>& positions) : body(body), positions(&positions) {}
+  BodyPositions(BodyHandle body, const std::vector<Vec3>&& positions) = delete;  // would dangle
+  template <typename Derived>
+  BodyPositions(BodyHandle body, const Eigen::DenseBase<Derived>& positions) : body(body) {
+    static_assert(std::is_same<typename Derived::Scalar, double>::value, "positions are doubles");
+    static_assert(Derived::ColsAtCompileTime == Eigen::Dynamic || Derived::ColsAtCompileTime == 3,
+                  "points and positions need three columns (x, y, z)");
+    static_assert((Derived::Flags & Eigen::DirectAccessBit) != 0,
+                  "a BodyPositions entry views a matrix's storage: evaluate the expression into a "
+                  "matrix first (or pass it to the single-body setPositions)");
+    if constexpr ((Derived::Flags & Eigen::DirectAccessBit) != 0) {
+      const Derived& m = positions.derived();
+      rows = {m.data(), m.rows(), m.cols(), m.rowStride(), m.colStride(), true};
+    }
+  }
+  template <typename Scalar, int R, int C, int O, int MR, int MC>
+  BodyPositions(BodyHandle body, Eigen::Matrix<Scalar, R, C, O, MR, MC>&& positions) = delete;  // would dangle
+  template <typename Scalar, int R, int C, int O, int MR, int MC>
+  BodyPositions(BodyHandle body, Eigen::Array<Scalar, R, C, O, MR, MC>&& positions) = delete;  // would dangle
+
+  // The coordinates of an Eigen matrix: x of vertex v at data[v * row_stride], y and z one and
+  // two column strides further.
+  struct MatrixView {
+    const double* data = nullptr;
+    Eigen::Index rows = 0, cols = 0, row_stride = 0, col_stride = 0;
+    bool given = false;  // made from a matrix
+  };
+
   BodyHandle body;
-  const std::vector<Vec3>* positions = nullptr;
+  const std::vector<Vec3>* positions = nullptr;  // a vector's positions, or
+  MatrixView rows;                               // (positions null) a matrix's, if given
 };
 
 struct ServiceOptions {
@@ -279,6 +320,15 @@ class DistanceService {
   // A key-framed body: frames[f][vertex] world positions, at time `time` (see setTime()).
   BodyHandle addKeyframed(std::shared_ptr<const Hierarchy> hierarchy,
                           std::vector<std::vector<Vec3>> frames, double time = 0);
+  // The same with frames held as Eigen matrices (three columns each, as PointsRef takes them).
+  template <typename Matrix, typename = std::enable_if_t<std::is_base_of<Eigen::DenseBase<Matrix>, Matrix>::value>>
+  BodyHandle addKeyframed(std::shared_ptr<const Hierarchy> hierarchy, const std::vector<Matrix>& frames,
+                          double time = 0) {
+    std::vector<std::vector<Vec3>> copied;
+    copied.reserve(frames.size());
+    for (const Matrix& frame : frames) copied.push_back(toPositions(frame));
+    return addKeyframed(std::move(hierarchy), std::move(copied), time);
+  }
   // A freely deforming body starting at `positions` (empty: the mesh's positions), whose
   // vertices may each move up to `displacement_bound` (>= 0, finite; world units) from where
   // the bounds were last computed before setPositions() re-anchors (see PositionsUpdate),
@@ -287,6 +337,8 @@ class DistanceService {
   // re-anchoring rare.
   BodyHandle addDeforming(std::shared_ptr<const Hierarchy> hierarchy, double displacement_bound,
                           const std::vector<Vec3>& positions = {});
+  BodyHandle addDeforming(std::shared_ptr<const Hierarchy> hierarchy, double displacement_bound,
+                          const PointsRef& positions);
 
   // Removes the body; its handle becomes stale. Throws std::invalid_argument for a stale handle.
   void remove(BodyHandle body);
@@ -316,10 +368,11 @@ class DistanceService {
   // kDeforming, several bodies at once: the same as setPositions(b.body, *b.positions) for
   // each entry (result i for entry i), the bodies updated in parallel on the service's threads.
   // Every entry is checked before any body changes (std::invalid_argument for a stale handle, a
-  // body that is not deforming or appears twice, a null or wrong-sized positions vector, a
-  // non-finite coordinate, positions spanning more than 1e50): on an error no body of the batch
-  // has changed. Every entry reads its positions as they were before the call, even where they
-  // are another batch body's positions() (those are copied first; the bodies change at once).
+  // body that is not deforming or appears twice, no positions, a wrong count of them, a matrix
+  // without 3 columns, a non-finite coordinate, positions spanning more than 1e50): on an error
+  // no body of the batch has changed. Every entry reads its positions as they were before the
+  // call, even where they are another batch body's positions() (those, and every matrix entry,
+  // are copied first; the bodies change at once).
   std::vector<PositionsUpdate> setPositions(const std::vector<BodyPositions>& batch);
   // kDeforming: changes the displacement bound and re-anchors at the current positions.
   void setDisplacementBound(BodyHandle body, double displacement_bound);

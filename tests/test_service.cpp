@@ -1379,6 +1379,13 @@ TEST_CASE("shared tables: hierarchyFor caches by mesh, shapes shared per hierarc
   CHECK(service.bodies().size() == 3);
 }
 
+// Two setPositions() calls did the same.
+static void checkSameUpdate(const PositionsUpdate& got, const PositionsUpdate& expected) {
+  CHECK(got.reanchored == expected.reanchored);
+  CHECK(got.worst_vertex == expected.worst_vertex);
+  CHECK(got.excess == expected.excess);
+}
+
 // A batched setPositions equals one body at a time: two services with the same world (three
 // deforming bodies of two meshes, one rigid), one updated body by body, the other in one batch
 // (2 threads), give bitwise identical steps and updates, re-anchoring included; a bad entry
@@ -1426,9 +1433,7 @@ TEST_CASE("batched setPositions equals one body at a time; bad batches change no
     REQUIRE(updates.size() == bodies.size());
     if (step == 8) CHECK(updates[1].reanchored);
     for (size_t k = 0; k < bodies.size(); ++k) {
-      CHECK(updates[k].reanchored == expected[k].reanchored);
-      CHECK(updates[k].worst_vertex == expected[k].worst_vertex);
-      CHECK(updates[k].excess == expected[k].excess);
+      checkSameUpdate(updates[k], expected[k]);
       CHECK(batched.positions(bodies[k].b) == positions[k]);
       CHECK(batched.positions(bodies[k].b) == single.positions(bodies[k].a));
     }
@@ -1463,6 +1468,128 @@ TEST_CASE("batched setPositions equals one body at a time; bad batches change no
   CHECK(batched.setPositions(std::vector<BodyPositions>{}).empty());
   CHECK(batched.setPositions({{bodies[0].b, &moved0}, {bodies[1].b, &moved1}}).size() == 2);
   CHECK(batched.positions(bodies[1].b) == moved1);
+}
+
+// Positions as Eigen matrices: addDeforming's starting positions, addKeyframed's frames and the
+// batched setPositions' entries, in every layout (row-major, column-major, a block of a wider
+// matrix, a map over a strided array), give the same bodies and answers as std::vector<Vec3>;
+// an entry of the wrong shape is refused with its entry named, and nothing changes.
+static_assert(std::is_constructible<BodyPositions, BodyHandle, const PointMatrix&>::value);
+static_assert(std::is_constructible<BodyPositions, BodyHandle, const Eigen::MatrixXd&>::value);
+static_assert(!std::is_constructible<BodyPositions, BodyHandle, PointMatrix>::value, "a temporary would dangle");
+static_assert(!std::is_constructible<BodyPositions, BodyHandle, Eigen::MatrixXd>::value, "a temporary would dangle");
+static_assert(!std::is_constructible<BodyPositions, BodyHandle, std::vector<Vec3>>::value, "a temporary would dangle");
+
+TEST_CASE("Eigen positions: starting positions, key frames and batch entries in any layout", "[service][eigen]") {
+  const Mesh sphere = scenes::icosphere(3);
+  const Mesh torus = scenes::torus(1.0, 0.3, 48, 24);
+  DistanceService vectors(ServiceOptions{1, 32}), matrices(ServiceOptions{2, 32});
+  const std::vector<const Mesh*> meshes = {&sphere, &torus, &sphere, &torus};
+  const std::vector<Vec3> centers = {Vec3(0, 0, 0), Vec3(3, 0, 0), Vec3(0, 3, 0), Vec3(3, 3, 0)};
+  auto rest = [&](size_t k) {
+    std::vector<Vec3> at(meshes[k]->positions.size());
+    for (size_t v = 0; v < at.size(); ++v) at[v] = meshes[k]->positions[v] + centers[k];
+    return at;
+  };
+  std::vector<BodyHandle> a, b;
+  for (size_t k = 0; k < meshes.size(); ++k) {
+    const std::vector<Vec3> at = rest(k);
+    a.push_back(vectors.addDeforming(vectors.hierarchyFor(*meshes[k]), 0.05, at));
+    const Eigen::MatrixXd column_major = toMatrix(at);
+    b.push_back(matrices.addDeforming(matrices.hierarchyFor(*meshes[k]), 0.05, column_major));
+    CHECK(matrices.positions(b.back()) == at);
+  }
+  // A key-framed body from a vector of column-major matrices.
+  const std::vector<std::vector<Vec3>> frames = {transformed(sphere.positions, makePose(0, Vec3::UnitZ(), Vec3(1.5, 1.5, 0))),
+                                                 transformed(sphere.positions, makePose(0.4, Vec3::UnitZ(), Vec3(1.5, 1.5, 0.5)))};
+  const std::vector<Eigen::MatrixXd> frame_matrices = {toMatrix(frames[0]), toMatrix(frames[1])};
+  const BodyHandle ka = vectors.addKeyframed(vectors.hierarchyFor(sphere), frames, 0.3);
+  const BodyHandle kb = matrices.addKeyframed(matrices.hierarchyFor(sphere), frame_matrices, 0.3);
+  CHECK(matrices.positions(kb) == vectors.positions(ka));
+
+  std::vector<Vec3> points;
+  for (size_t k = 0; k < meshes.size(); ++k)
+    for (const Vec3& x : scenes::nearSurfacePoints(*meshes[k], 200, 0.1, 7 + static_cast<int>(k)))
+      points.push_back(x + centers[k]);
+  Failures same("Eigen batch entries vs std::vector entries");
+  StepResult ra, rb;
+  for (int step = 0; step < 8; ++step) {
+    INFO("step " << step);
+    std::vector<std::vector<Vec3>> positions(meshes.size());
+    for (size_t k = 0; k < meshes.size(); ++k)
+      positions[k] = wave(rest(k), centers[k], step == 5 && k == 2 ? 0.3 : 0.01, 0.4 * step);
+    // Four layouts: row-major, column-major, the middle three columns of a 5-column matrix, and
+    // a map over an array of 4 doubles per vertex (x, pad, y, pad... with strides 4 and 1 would
+    // read the pad; here column stride 2, row stride 6: x _ y _ z _).
+    const PointMatrix row_major = toMatrix(positions[0]);
+    const Eigen::MatrixXd column_major = toMatrix(positions[1]);
+    Eigen::MatrixXd wide = Eigen::MatrixXd::Constant(static_cast<Eigen::Index>(positions[2].size()), 5, std::nan(""));
+    wide.middleCols(1, 3) = toMatrix(positions[2]);
+    std::vector<double> strided(6 * positions[3].size(), std::nan(""));
+    for (size_t v = 0; v < positions[3].size(); ++v)
+      for (int c = 0; c < 3; ++c) strided[6 * v + 2 * c] = positions[3][v][c];
+    const Eigen::Map<const PointMatrix, Eigen::Unaligned, Eigen::Stride<6, 2>> mapped(
+        strided.data(), static_cast<Eigen::Index>(positions[3].size()), 3);
+    const std::vector<PositionsUpdate> expected =
+        vectors.setPositions({{a[0], positions[0]}, {a[1], &positions[1]}, {a[2], positions[2]}, {a[3], positions[3]}});
+    const std::vector<PositionsUpdate> updates = matrices.setPositions(
+        {{b[0], row_major}, {b[1], column_major}, {b[2], wide.middleCols(1, 3)}, {b[3], mapped}});
+    REQUIRE(updates.size() == expected.size());
+    if (step == 5) CHECK(updates[2].reanchored);
+    for (size_t k = 0; k < meshes.size(); ++k) {
+      checkSameUpdate(updates[k], expected[k]);
+      CHECK(matrices.positions(b[k]) == positions[k]);
+    }
+    vectors.setTime(ka, 0.1 * step);
+    matrices.setTime(kb, 0.1 * step);
+    vectors.step(toMatrix(points), 0.2, QueryMode::kClosest, ra);
+    matrices.step(toMatrix(points), 0.2, QueryMode::kClosest, rb);
+    checkIdentical(ra, rb, same);
+    CHECK(ra.stats().hits > 200);
+  }
+
+  // Bad entries: the entry is named, and no body changes.
+  const std::vector<Vec3> before0 = matrices.positions(b[0]), before1 = matrices.positions(b[1]);
+  std::vector<Vec3> moved0 = before0;
+  for (Vec3& x : moved0) x.z() += 0.01;
+  const Eigen::MatrixXd moved1 = toMatrix(matrices.positions(b[1])).array() + 0.01;
+  auto expectUnchanged = [&](const std::vector<BodyPositions>& batch, const char* message) {
+    INFO(message);
+    CHECK_THROWS_WITH(matrices.setPositions(batch), Catch::Contains(message));
+    CHECK(matrices.positions(b[0]) == before0);
+    CHECK(matrices.positions(b[1]) == before1);
+  };
+  const Eigen::MatrixXd two_columns = moved1.leftCols(2);
+  const Eigen::MatrixXd four_columns = Eigen::MatrixXd::Zero(moved1.rows(), 4);
+  const Eigen::MatrixXd short_rows = moved1.topRows(moved1.rows() - 1);
+  const Eigen::MatrixXd empty;
+  Eigen::MatrixXd with_inf = moved1;
+  with_inf(3, 2) = std::numeric_limits<double>::infinity();
+  expectUnchanged({{b[0], moved0}, {b[1], two_columns}}, "batch entry 1 (body 1): positions need 3 columns (x, y, z), got 2");
+  expectUnchanged({{b[0], moved0}, {b[1], four_columns}}, "got 4");
+  expectUnchanged({{b[0], moved0}, {b[1], empty}}, "got 0");
+  expectUnchanged({{b[0], moved0}, {b[1], short_rows}},
+                  ("batch entry 1 (body 1): " + std::to_string(moved1.rows() - 1) + " positions, the mesh has " +
+                   std::to_string(moved1.rows()) + " vertices").c_str());
+  expectUnchanged({{b[0], moved0}, {b[1], with_inf}}, "batch entry 1 (body 1) has a non-finite position");
+  BodyPositions no_positions;
+  no_positions.body = b[1];
+  expectUnchanged({{b[0], moved0}, no_positions}, "batch entry 1 (body 1): null positions");
+  // An entry mapping another batch body's own positions (both spheres) reads them as they were
+  // before the call, while that body changes.
+  const std::vector<Vec3> old2 = matrices.positions(b[2]);
+  std::vector<Vec3> moved2 = old2;
+  for (Vec3& x : moved2) x.x() -= 0.01;
+  const Eigen::Map<const PointMatrix> over2(matrices.positions(b[2]).front().data(),
+                                            static_cast<Eigen::Index>(old2.size()), 3);
+  CHECK(matrices.setPositions({{b[0], over2}, {b[2], moved2}}).size() == 2);
+  CHECK(matrices.positions(b[0]) == old2);
+  CHECK(matrices.positions(b[2]) == moved2);
+  // addDeforming refuses a matrix of the wrong shape by name.
+  CHECK_THROWS_WITH(matrices.addDeforming(matrices.hierarchyFor(sphere), 0.05, Eigen::MatrixXd(Eigen::MatrixXd::Zero(5, 2))),
+                    Catch::Contains("need 3 columns (x, y, z), got 2"));
+  CHECK_THROWS_AS(matrices.addDeforming(matrices.hierarchyFor(sphere), 0.05, Eigen::MatrixXd(Eigen::MatrixXd::Zero(5, 3))),
+                  std::invalid_argument);
 }
 
 TEST_CASE("bad input: NaN points, stale handles, wrong sizes, wrong kinds", "[service][errors]") {
