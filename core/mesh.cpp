@@ -87,14 +87,14 @@ double positionsDiagonal(const std::vector<Vec3>& positions) {
   if (positions.empty()) return 0;
   Vec3 lower, upper;
   positionsBounds(positions, lower, upper);
-  return (upper - lower).stableNorm();  // no underflow to 0 below 1e-154, no overflow
+  return stableLength(upper - lower);  // no underflow to 0 below 1e-154, no overflow
 }
 
 double usedPositionsDiagonal(const Mesh& mesh, const std::vector<Vec3>& positions) {
   if (mesh.triangles.empty()) return 0;
   Vec3 lower, upper;
   usedBounds(mesh.triangles, positions, lower, upper);
-  return (upper - lower).stableNorm();
+  return stableLength(upper - lower);
 }
 
 bool withinMeshSize(const Mesh& mesh, const std::vector<Vec3>& positions) {
@@ -106,7 +106,7 @@ double meshDiagonal(const Mesh& mesh) {
   meshBounds(mesh, lower, upper);
   // A plain norm's square underflows to 0 below about 1e-154: such a mesh passed checkMesh's
   // size check as a single point (found by review).
-  return (upper - lower).stableNorm();
+  return stableLength(upper - lower);
 }
 
 }  // namespace meshsweeper

@@ -24,6 +24,18 @@ inline constexpr uint32_t kInvalidIndex = 0xffffffffu;
 // double, so no distance overflows.
 inline constexpr double kMaxCoordinate = 1e150;
 inline constexpr double kMaxQueryCoordinate = 1e153;
+// |d| with no underflow of the squares to 0 (below about 1e-154) and no overflow: scaled by the
+// largest coordinate, as Eigen's stableNorm() does. (stableNorm's blocked loop draws GCC 12's
+// maybe-uninitialized false positive in its AVX-512 code in the ASan/UBSan build.) Infinite
+// for an infinite coordinate, NaN for a NaN one.
+inline double stableLength(const Vec3& d) {
+  if (!d.allFinite())
+    return d.hasNaN() ? std::numeric_limits<double>::quiet_NaN() : std::numeric_limits<double>::infinity();
+  const double scale = d.cwiseAbs().maxCoeff();
+  if (scale == 0) return 0;
+  return scale * (d / scale).norm();
+}
+
 // Finite and within `limit` on every axis (false for NaN).
 inline bool inCoordinateRange(const Vec3& x, double limit = kMaxCoordinate) {
   return std::abs(x.x()) <= limit && std::abs(x.y()) <= limit && std::abs(x.z()) <= limit;

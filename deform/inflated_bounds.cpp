@@ -391,7 +391,7 @@ DisplacementCheck DeformingBody::setPositions(const std::vector<Vec3>& positions
     }
   }
   if (!check.accepted) return check;
-  checkExtent(positions, (upper - lower).stableNorm(), "positions");  // as positionsDiagonal()
+  checkExtent(positions, stableLength(upper - lower), "positions");  // as positionsDiagonal()
   if (moved2 > 0) growRegionDrift(by_region, std::sqrt(moved2));
   positions_ = positions;
   refreshInlineFaces();

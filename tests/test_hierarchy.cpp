@@ -794,3 +794,33 @@ TEST_CASE("float roundings: floatAtLeast, floatAbove, floatBelow", "[hierarchy]"
   }
   CHECK(checked == 50000);
 }
+
+// The mesh's size check reads its diagonal through stableLength: a plain norm's square
+// underflows to 0 below about 1e-154 (a tiny mesh would pass as a point) and overflows above
+// about 1e154. Checked against long double (whose exponent range holds every square of a
+// double) at every scale a double has, and on the special values.
+TEST_CASE("stableLength: no underflow or overflow at any scale; NaN and infinity kept", "[hierarchy]") {
+  Random random(43);
+  for (int i = 0; i < 20000; ++i) {
+    const int exponent = static_cast<int>(random.uniform(-1070, 1020));
+    Vec3 d;
+    for (int c = 0; c < 3; ++c)
+      d[c] = std::ldexp(random.uniform(-1.0, 1.0), exponent + static_cast<int>(random.uniform(-40, 2)));
+    if (i % 7 == 0) d[i % 3] = 0;
+    const long double x = d.x(), y = d.y(), z = d.z();
+    const long double expected = std::sqrt(x * x + y * y + z * z);
+    const double length = stableLength(d);
+    INFO(d.transpose() << " -> " << length);
+    REQUIRE(std::isfinite(length));
+    // A few ulps (of the result, or of the smallest subnormal when the result is one).
+    REQUIRE(std::abs(static_cast<long double>(length) - expected) <= 1e-15L * expected + 1e-323L);
+  }
+  const double nan = std::numeric_limits<double>::quiet_NaN(), inf = std::numeric_limits<double>::infinity();
+  CHECK(stableLength(Vec3(0, 0, 0)) == 0);
+  CHECK(stableLength(Vec3(-3, 4, 0)) == 5);
+  CHECK(std::isnan(stableLength(Vec3(0, 0, nan))));  // Eigen's stableNorm gives 0 here
+  CHECK(std::isnan(stableLength(Vec3(inf, 0, nan))));
+  CHECK(stableLength(Vec3(1, -inf, 2)) == inf);
+  CHECK(stableLength(Vec3(1e-300, 1e-300, 0)) > 1.4e-300);
+  CHECK(stableLength(Vec3(1e300, -1e300, 1e300)) > 1.7e300);
+}
