@@ -1153,20 +1153,23 @@ void DistanceService::setTime(BodyHandle body, double t) {
   b.box_dirty = true;
 }
 
+namespace {
+void copyRows(const PointRows& rows, std::vector<Vec3>& out) {
+  out.resize(static_cast<size_t>(rows.rows()));
+  for (Eigen::Index i = 0; i < rows.rows(); ++i) out[i] = rows.row(i).transpose();
+}
+}  // namespace
+
 std::vector<Vec3> toPositions(const PointsRef& points) {
-  const PointRows& rows = points.matrix();
-  std::vector<Vec3> v(static_cast<size_t>(rows.rows()));
-  for (Eigen::Index i = 0; i < rows.rows(); ++i) v[i] = rows.row(i).transpose();
+  std::vector<Vec3> v;
+  copyRows(points.matrix(), v);
   return v;
 }
 
 PositionsUpdate DistanceService::setPositions(BodyHandle body, const PointsRef& points) {
   impl_->body(body, "setPositions", BodyKind::kDeforming);
-  const PointRows& positions = points.matrix();
-  std::vector<Vec3>& v = impl_->positions_scratch;
-  v.resize(static_cast<size_t>(positions.rows()));
-  for (Eigen::Index i = 0; i < positions.rows(); ++i) v[i] = positions.row(i).transpose();
-  return setPositions(body, v);
+  copyRows(points.matrix(), impl_->positions_scratch);  // its capacity kept from step to step
+  return setPositions(body, impl_->positions_scratch);
 }
 
 PositionsUpdate DistanceService::setPositions(BodyHandle body, const std::vector<Vec3>& positions) {
