@@ -41,9 +41,11 @@
 #include <cstdio>
 #include <limits>
 #include <map>
+#include <numeric>
 #include <stdexcept>
 #include <string>
 #include <unordered_map>
+#include <utility>
 
 namespace meshsweeper {
 namespace {
@@ -1098,8 +1100,22 @@ BodyHandle DistanceService::addDeforming(std::shared_ptr<const Hierarchy> hierar
   return impl_->add(std::move(b));
 }
 
+BodyHandle DistanceService::addKeyframed(std::shared_ptr<const Hierarchy> hierarchy,
+                                         std::initializer_list<PointsRef> frames, double time) {
+  std::vector<std::vector<Vec3>> copied;
+  copied.reserve(frames.size());
+  for (const PointsRef& frame : frames) copied.push_back(toPositions(frame));
+  return addKeyframed(std::move(hierarchy), std::move(copied), time);
+}
+
 BodyHandle DistanceService::addDeforming(std::shared_ptr<const Hierarchy> hierarchy, double displacement_bound,
                                          const PointsRef& positions) {
+  // Unlike the vector's default (empty: the mesh's positions), a matrix always gives positions:
+  // one of 0 rows is a wrong count (found by an audit: it started the body at the mesh's own).
+  if (hierarchy && positions.matrix().rows() != static_cast<Eigen::Index>(hierarchy->mesh().positions.size()))
+    throw std::invalid_argument("DistanceService::addDeforming (a new body): " +
+                                std::to_string(positions.matrix().rows()) + " positions, the mesh has " +
+                                std::to_string(hierarchy->mesh().positions.size()) + " vertices");
   return addDeforming(std::move(hierarchy), displacement_bound, toPositions(positions));
 }
 
@@ -1208,11 +1224,15 @@ std::vector<PositionsUpdate> DistanceService::setPositions(const std::vector<Bod
     targets[i] = &b;
     slots[i] = batch[i].body.index;
   }
-  std::sort(slots.begin(), slots.end());
-  const auto repeated = std::adjacent_find(slots.begin(), slots.end());
-  if (repeated != slots.end())
-    throw std::invalid_argument("DistanceService::setPositions: body " + std::to_string(*repeated) +
-                                " appears twice in the batch");
+  std::vector<size_t> order(batch.size());
+  std::iota(order.begin(), order.end(), size_t{0});
+  std::sort(order.begin(), order.end(), [&](size_t x, size_t y) { return std::pair(slots[x], x) < std::pair(slots[y], y); });
+  const auto repeated =
+      std::adjacent_find(order.begin(), order.end(), [&](size_t x, size_t y) { return slots[x] == slots[y]; });
+  if (repeated != order.end())
+    throw std::invalid_argument("DistanceService::" + entry(*(repeated + 1)) + ": body " +
+                                std::to_string(slots[*repeated]) + " appears twice in the batch (entries " +
+                                std::to_string(*repeated) + " and " + std::to_string(*(repeated + 1)) + ")");
   // The bodies commit in parallel: an entry whose positions are a batch body's own vectors
   // (positions(other) of a deforming body) would read them while that body changes them. Such
   // entries are copied first, so every entry sees the positions as they were before the call.

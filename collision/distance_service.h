@@ -38,7 +38,10 @@
 #include <Eigen/Core>
 #include <Eigen/Geometry>
 
+#include <initializer_list>
 #include <memory>
+#include <stdexcept>
+#include <string>
 #include <type_traits>
 #include <vector>
 
@@ -212,38 +215,47 @@ struct PositionsUpdate {
 };
 
 // One entry of a batched setPositions(): a deforming body and its new positions, one per mesh
-// vertex, read during the call only (the entry is a view: what it names must outlive the call).
-// The positions are either a std::vector<Vec3> ({body, &positions} or {body, positions}) or an
-// Eigen matrix of doubles with three columns and its own storage, in any layout: a PointMatrix,
-// a column-major Eigen::MatrixXd, a block of one, an Eigen::Map over the simulator's array. An
-// expression without storage (a product, a sum) does not compile, nor does a temporary matrix
-// (it would be gone before the call); a matrix whose column count is not 3 at run time is
-// refused by the call, with the entry named.
+// vertex. The positions are a std::vector<Vec3> or any Eigen matrix or expression of doubles
+// with three columns, one row (x, y, z) per vertex:
+//  - a named vector or matrix with storage (a std::vector<Vec3>, `{body, &positions}` included;
+//    a PointMatrix, an Eigen::MatrixXd of either storage order, an Eigen::Map with any
+//    strides, an Eigen::Array) is a view, read during the call (matrices are copied then, in
+//    parallel over the entries): it must outlive the call;
+//  - anything else (a temporary vector or matrix, an expression such as V * 2, a block or a
+//    Map written in place, a function's result) is copied into the entry when the entry is made,
+//    so nothing the entry names can be gone before the call (found by an audit: views of
+//    temporaries were read after they were freed).
+// A matrix whose column count is fixed at another number does not compile; one whose count is
+// not 3 at run time is refused by the call, with the entry named.
+static_assert(sizeof(Vec3) == 3 * sizeof(double), "Vec3 is three packed doubles");
 struct BodyPositions {
   BodyPositions() = default;
   BodyPositions(BodyHandle body, const std::vector<Vec3>* positions) : body(body), positions(positions) {}
   BodyPositions(BodyHandle body, const std::vector<Vec3>& positions) : body(body), positions(&positions) {}
-  BodyPositions(BodyHandle body, const std::vector<Vec3>&& positions) = delete;  // would dangle
-  template <typename Derived>
-  BodyPositions(BodyHandle body, const Eigen::DenseBase<Derived>& positions) : body(body) {
-    static_assert(std::is_same<typename Derived::Scalar, double>::value, "positions are doubles");
-    static_assert(Derived::ColsAtCompileTime == Eigen::Dynamic || Derived::ColsAtCompileTime == 3,
+  BodyPositions(BodyHandle body, std::vector<Vec3>&& positions)
+      : body(body), owned(std::make_shared<const std::vector<Vec3>>(std::move(positions))), positions(owned.get()) {}
+  template <typename Matrix, typename Plain = std::decay_t<Matrix>,
+            typename = std::enable_if_t<std::is_base_of<Eigen::DenseBase<Plain>, Plain>::value>>
+  BodyPositions(BodyHandle body, Matrix&& matrix) : body(body) {
+    static_assert(std::is_same<typename Plain::Scalar, double>::value, "positions are doubles");
+    static_assert(Plain::ColsAtCompileTime == Eigen::Dynamic || Plain::ColsAtCompileTime == 3,
                   "points and positions need three columns (x, y, z)");
-    static_assert((Derived::Flags & Eigen::DirectAccessBit) != 0,
-                  "a BodyPositions entry views a matrix's storage: evaluate the expression into a "
-                  "matrix first (or pass it to the single-body setPositions)");
-    if constexpr ((Derived::Flags & Eigen::DirectAccessBit) != 0) {
-      const Derived& m = positions.derived();
-      rows = {m.data(), m.rows(), m.cols(), m.rowStride(), m.colStride(), true};
+    if constexpr (std::is_lvalue_reference<Matrix>::value && (Plain::Flags & Eigen::DirectAccessBit) != 0) {
+      rows = {matrix.data(), matrix.rows(), matrix.cols(), matrix.rowStride(), matrix.colStride(), true};
+    } else if (matrix.cols() != 3) {
+      rows.cols = matrix.cols();  // refused by the call, with the entry named
+      rows.given = true;
+    } else {
+      auto copy = std::make_shared<std::vector<Vec3>>(static_cast<size_t>(matrix.rows()));
+      if (!copy->empty())  // Vec3 is three packed doubles: the vector is a row-major n x 3 array
+        Eigen::Map<PointMatrix>(copy->front().data(), matrix.rows(), 3) = matrix;
+      owned = std::move(copy);
+      positions = owned.get();
     }
   }
-  template <typename Scalar, int R, int C, int O, int MR, int MC>
-  BodyPositions(BodyHandle body, Eigen::Matrix<Scalar, R, C, O, MR, MC>&& positions) = delete;  // would dangle
-  template <typename Scalar, int R, int C, int O, int MR, int MC>
-  BodyPositions(BodyHandle body, Eigen::Array<Scalar, R, C, O, MR, MC>&& positions) = delete;  // would dangle
 
-  // The coordinates of an Eigen matrix: x of vertex v at data[v * row_stride], y and z one and
-  // two column strides further.
+  // The coordinates of a named Eigen matrix: x of vertex v at data[v * row_stride], y and z
+  // one and two column strides further.
   struct MatrixView {
     const double* data = nullptr;
     Eigen::Index rows = 0, cols = 0, row_stride = 0, col_stride = 0;
@@ -251,8 +263,9 @@ struct BodyPositions {
   };
 
   BodyHandle body;
-  const std::vector<Vec3>* positions = nullptr;  // a vector's positions, or
-  MatrixView rows;                               // (positions null) a matrix's, if given
+  std::shared_ptr<const std::vector<Vec3>> owned;  // the copy of a temporary, if any
+  const std::vector<Vec3>* positions = nullptr;    // a vector's positions (or the copy), or
+  MatrixView rows;                                 // (positions null) a named matrix's, if given
 };
 
 struct ServiceOptions {
@@ -320,15 +333,26 @@ class DistanceService {
   // A key-framed body: frames[f][vertex] world positions, at time `time` (see setTime()).
   BodyHandle addKeyframed(std::shared_ptr<const Hierarchy> hierarchy,
                           std::vector<std::vector<Vec3>> frames, double time = 0);
-  // The same with frames held as Eigen matrices (three columns each, as PointsRef takes them).
+  // The same with frames held as Eigen matrices (three columns each, as PointsRef takes them):
+  // a std::vector of them, or a braced list ({V0, V1}, of any matrix types; there a frame with
+  // another column count throws PointsRef's error as the list is made, before the call).
   template <typename Matrix, typename = std::enable_if_t<std::is_base_of<Eigen::DenseBase<Matrix>, Matrix>::value>>
   BodyHandle addKeyframed(std::shared_ptr<const Hierarchy> hierarchy, const std::vector<Matrix>& frames,
                           double time = 0) {
     std::vector<std::vector<Vec3>> copied;
     copied.reserve(frames.size());
-    for (const Matrix& frame : frames) copied.push_back(toPositions(frame));
+    for (size_t f = 0; f < frames.size(); ++f) {
+      try {
+        copied.push_back(toPositions(frames[f]));
+      } catch (const std::invalid_argument& e) {  // a column count: the frame named
+        throw std::invalid_argument("DistanceService::addKeyframed (a new body): frame " + std::to_string(f) +
+                                    ": " + e.what());
+      }
+    }
     return addKeyframed(std::move(hierarchy), std::move(copied), time);
   }
+  BodyHandle addKeyframed(std::shared_ptr<const Hierarchy> hierarchy, std::initializer_list<PointsRef> frames,
+                          double time = 0);
   // A freely deforming body starting at `positions` (empty: the mesh's positions), whose
   // vertices may each move up to `displacement_bound` (>= 0, finite; world units) from where
   // the bounds were last computed before setPositions() re-anchors (see PositionsUpdate),
@@ -381,7 +405,12 @@ class DistanceService {
   // tested at least 2.5 leaf blocks per leaf block of its hierarchy (a cloth draped over it),
   // off again below 1 (a body few points reach). Answers never depend on it.
   bool inlineFaces(BodyHandle body) const;
-  // kKeyframed, kDeforming: the current world positions [vertex].
+  // kKeyframed, kDeforming: the current world positions [vertex]. The reference (and any
+  // pointer or Eigen::Map into it) is valid until the body's next setTime(), setPositions(),
+  // setDisplacementBound() or remove(): a deforming body keeps its world positions in another
+  // vector while it follows a frame (found by an audit: a reference kept from before the
+  // first frame then held the frame's coordinates, and a Map kept across a return to world
+  // coordinates read freed memory). Copy the positions to keep them.
   const std::vector<Vec3>& positions(BodyHandle body) const;
   // The body's world box: rigid, its rest box's 8 corners transformed (with a 1e-12 relative
   // margin for rounding); otherwise the box of its current positions (a deforming body in a

@@ -1474,11 +1474,6 @@ TEST_CASE("batched setPositions equals one body at a time; bad batches change no
 // batched setPositions' entries, in every layout (row-major, column-major, a block of a wider
 // matrix, a map over a strided array), give the same bodies and answers as std::vector<Vec3>;
 // an entry of the wrong shape is refused with its entry named, and nothing changes.
-static_assert(std::is_constructible<BodyPositions, BodyHandle, const PointMatrix&>::value);
-static_assert(std::is_constructible<BodyPositions, BodyHandle, const Eigen::MatrixXd&>::value);
-static_assert(!std::is_constructible<BodyPositions, BodyHandle, PointMatrix>::value, "a temporary would dangle");
-static_assert(!std::is_constructible<BodyPositions, BodyHandle, Eigen::MatrixXd>::value, "a temporary would dangle");
-static_assert(!std::is_constructible<BodyPositions, BodyHandle, std::vector<Vec3>>::value, "a temporary would dangle");
 
 TEST_CASE("Eigen positions: starting positions, key frames and batch entries in any layout", "[service][eigen]") {
   const Mesh sphere = scenes::icosphere(3);
@@ -1506,6 +1501,19 @@ TEST_CASE("Eigen positions: starting positions, key frames and batch entries in 
   const BodyHandle ka = vectors.addKeyframed(vectors.hierarchyFor(sphere), frames, 0.3);
   const BodyHandle kb = matrices.addKeyframed(matrices.hierarchyFor(sphere), frame_matrices, 0.3);
   CHECK(matrices.positions(kb) == vectors.positions(ka));
+  {  // A braced list of mixed matrix types; a frame of 2 columns named.
+    const PointMatrix frame0 = toMatrix(frames[0]);
+    DistanceService braced;
+    const BodyHandle k = braced.addKeyframed(braced.hierarchyFor(sphere), {frame0, frame_matrices[1]}, 0.3);
+    CHECK(braced.positions(k) == vectors.positions(ka));
+    const std::vector<Eigen::MatrixXd> bad_frames = {frame_matrices[0], frame_matrices[1].leftCols(2)};
+    CHECK_THROWS_WITH(braced.addKeyframed(braced.hierarchyFor(sphere), bad_frames),
+                      Catch::Contains("addKeyframed (a new body): frame 1: ") && Catch::Contains("got 2"));
+    // A matrix always gives positions: 0 rows is a wrong count, not the mesh's own positions.
+    CHECK_THROWS_WITH(braced.addDeforming(braced.hierarchyFor(sphere), 0.05, PointMatrix(0, 3)),
+                      Catch::Contains("0 positions, the mesh has"));
+    CHECK(braced.bodyCount() == 1);
+  }
 
   std::vector<Vec3> points;
   for (size_t k = 0; k < meshes.size(); ++k)
@@ -1572,6 +1580,9 @@ TEST_CASE("Eigen positions: starting positions, key frames and batch entries in 
                   ("batch entry 1 (body 1): " + std::to_string(moved1.rows() - 1) + " positions, the mesh has " +
                    std::to_string(moved1.rows()) + " vertices").c_str());
   expectUnchanged({{b[0], moved0}, {b[1], with_inf}}, "batch entry 1 (body 1) has a non-finite position");
+  expectUnchanged({{b[1], moved1}, {b[0], moved0}, {b[1], moved1}},
+                  "batch entry 2 (body 1): body 1 appears twice in the batch (entries 0 and 2)");
+  expectUnchanged({{b[0], moved0}, {b[1], Eigen::MatrixXd(moved1.leftCols(2))}}, "batch entry 1 (body 1): positions need 3 columns");
   BodyPositions no_positions;
   no_positions.body = b[1];
   expectUnchanged({{b[0], moved0}, no_positions}, "batch entry 1 (body 1): null positions");
@@ -1585,6 +1596,41 @@ TEST_CASE("Eigen positions: starting positions, key frames and batch entries in 
   CHECK(matrices.setPositions({{b[0], over2}, {b[2], moved2}}).size() == 2);
   CHECK(matrices.positions(b[0]) == old2);
   CHECK(matrices.positions(b[2]) == moved2);
+  // Entries made from temporaries (a function's matrix, an expression, .eval(), a block of a
+  // temporary, a temporary vector, a temporary Ref holding its own copy) keep a copy: the batch
+  // is made in one statement and used in the next, after every temporary is gone (an audit saw
+  // views of them read after they were freed; ASan checks this in its build).
+  {
+    std::vector<Vec3> target0 = moved0, target1 = matrices.positions(b[1]), target2 = matrices.positions(b[2]),
+                      target3 = matrices.positions(b[3]);
+    for (Vec3& x : target0) x.y() += 0.002;
+    for (Vec3& x : target1) x.y() += 0.002;
+    for (Vec3& x : target2) x.y() -= 0.002;
+    for (Vec3& x : target3) x.y() -= 0.002;
+    const Eigen::MatrixXd half1 = toMatrix(target1) / 2;
+    auto makeMatrix = [](const std::vector<Vec3>& v) { return Eigen::MatrixXd(toMatrix(v)); };
+    auto makeWide = [](const std::vector<Vec3>& v) {
+      Eigen::MatrixXd wide = Eigen::MatrixXd::Zero(static_cast<Eigen::Index>(v.size()), 5);
+      wide.middleCols(2, 3) = toMatrix(v);
+      return wide;
+    };
+    std::vector<BodyPositions> batch = {{b[0], makeMatrix(target0)},
+                                        {b[1], half1 * 2.0},
+                                        {b[2], makeWide(target2).middleCols(2, 3)},
+                                        {b[3], Eigen::Ref<const PointMatrix>(makeMatrix(target3))}};
+    batch.push_back({b[3], std::vector<Vec3>(target3)});  // replaces the entry above: one per body
+    batch.erase(batch.begin() + 3);
+    std::vector<Vec3> scratch(target0.size() * 4, Vec3(7, 7, 7));  // reuses freed memory, if any
+    CHECK(matrices.setPositions(batch).size() == 4);
+    CHECK(matrices.positions(b[0]) == target0);
+    CHECK(matrices.positions(b[1]) == target1);
+    CHECK(matrices.positions(b[2]) == target2);
+    CHECK(matrices.positions(b[3]) == target3);
+    const std::vector<BodyPositions> by_ref = {{b[2], Eigen::Ref<const PointMatrix>(makeMatrix(target0))}};
+    scratch.assign(target0.size() * 4, Vec3(8, 8, 8));
+    CHECK(matrices.setPositions(by_ref).size() == 1);
+    CHECK(matrices.positions(b[2]) == target0);
+  }
   // addDeforming refuses a matrix of the wrong shape by name.
   CHECK_THROWS_WITH(matrices.addDeforming(matrices.hierarchyFor(sphere), 0.05, Eigen::MatrixXd(Eigen::MatrixXd::Zero(5, 2))),
                     Catch::Contains("need 3 columns (x, y, z), got 2"));
