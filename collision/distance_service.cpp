@@ -41,11 +41,9 @@
 #include <cstdio>
 #include <limits>
 #include <map>
-#include <numeric>
 #include <stdexcept>
 #include <string>
 #include <unordered_map>
-#include <utility>
 
 namespace meshsweeper {
 namespace {
@@ -1112,9 +1110,9 @@ BodyHandle DistanceService::addDeforming(std::shared_ptr<const Hierarchy> hierar
                                          const PointsRef& positions) {
   // Unlike the vector's default (empty: the mesh's positions), a matrix always gives positions:
   // one of 0 rows is a wrong count (found by an audit: it started the body at the mesh's own).
-  if (hierarchy && positions.matrix().rows() != static_cast<Eigen::Index>(hierarchy->mesh().positions.size()))
-    throw std::invalid_argument("DistanceService::addDeforming (a new body): " +
-                                std::to_string(positions.matrix().rows()) + " positions, the mesh has " +
+  // Other counts are checked where the vector's are.
+  if (hierarchy && positions.matrix().rows() == 0)
+    throw std::invalid_argument("DistanceService::addDeforming (a new body): 0 positions, the mesh has " +
                                 std::to_string(hierarchy->mesh().positions.size()) + " vertices");
   return addDeforming(std::move(hierarchy), displacement_bound, toPositions(positions));
 }
@@ -1209,7 +1207,7 @@ std::vector<PositionsUpdate> DistanceService::setPositions(const std::vector<Bod
   };
   // Every entry checked before any body changes.
   std::vector<Body*> targets(batch.size());
-  std::vector<uint32_t> slots(batch.size());
+  std::unordered_map<uint32_t, size_t> first_entry;  // slot -> the first entry naming it
   for (size_t i = 0; i < batch.size(); ++i) {
     Body& b = impl_->body(batch[i].body, entry(i).c_str(), BodyKind::kDeforming);
     const BodyPositions::MatrixView& rows = batch[i].rows;
@@ -1222,17 +1220,11 @@ std::vector<PositionsUpdate> DistanceService::setPositions(const std::vector<Bod
       throw error(i, ": " + std::to_string(count) + " positions, the mesh has " + std::to_string(expected) +
                          " vertices");
     targets[i] = &b;
-    slots[i] = batch[i].body.index;
+    const auto [first, fresh] = first_entry.emplace(batch[i].body.index, i);
+    if (!fresh)
+      throw error(i, ": body " + std::to_string(batch[i].body.index) + " appears twice in the batch (entries " +
+                         std::to_string(first->second) + " and " + std::to_string(i) + ")");
   }
-  std::vector<size_t> order(batch.size());
-  std::iota(order.begin(), order.end(), size_t{0});
-  std::sort(order.begin(), order.end(), [&](size_t x, size_t y) { return std::pair(slots[x], x) < std::pair(slots[y], y); });
-  const auto repeated =
-      std::adjacent_find(order.begin(), order.end(), [&](size_t x, size_t y) { return slots[x] == slots[y]; });
-  if (repeated != order.end())
-    throw std::invalid_argument("DistanceService::" + entry(*(repeated + 1)) + ": body " +
-                                std::to_string(slots[*repeated]) + " appears twice in the batch (entries " +
-                                std::to_string(*repeated) + " and " + std::to_string(*(repeated + 1)) + ")");
   // The bodies commit in parallel: an entry whose positions are a batch body's own vectors
   // (positions(other) of a deforming body) would read them while that body changes them. Such
   // entries are copied first, so every entry sees the positions as they were before the call.
