@@ -447,6 +447,22 @@ Vec3 BodyShape::pseudonormalAsGiven(TriangleIndex triangle, Feature feature, con
                             vertex_faces_.data() + vertex_face_begin_[v + 1]);
 }
 
+int restSide(const BodyShape& shape, const Vec3& p, TriangleIndex triangle, Feature feature, const Vec3& closest,
+             double distance) {
+  if (!shape.closed()) return 0;
+  const double touch = 16 * std::numeric_limits<double>::epsilon() * p.cwiseAbs().maxCoeff();
+  const Vec3 offset = p - closest;
+  if (!(distance > touch) || !(offset.squaredNorm() > 0)) return 1;  // on the surface
+  double outside2 = 0;  // squared distance from p to the rest box
+  for (int axis = 0; axis < 3; ++axis) {
+    const double gap =
+        std::max({shape.restLower()[axis] - p[axis], p[axis] - shape.restUpper()[axis], 0.0});
+    outside2 += gap * gap;
+  }
+  if (outside2 > touch * touch) return 1;
+  return offset.dot(shape.restPseudonormal(triangle, feature)) < 0 ? -1 : 1;
+}
+
 size_t BodyShape::bytes() const {
   return vertex_face_begin_.size() * sizeof(uint32_t) + vertex_faces_.size() * sizeof(TriangleIndex) +
          edge_neighbor_.size() * sizeof(TriangleIndex) +

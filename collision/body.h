@@ -23,6 +23,7 @@
 //    surface inside out (a mirror image): their orientation (orientationAt()) is that of the
 //    volume they enclose, not the rest positions'.
 #include "core/hierarchy.h"
+#include "core/sweep_query.h"
 #include "core/triangle_distance.h"
 
 #include <memory>
@@ -134,6 +135,25 @@ class BodyShape {
   std::vector<uint32_t> face_component_;
   std::vector<VertexIndex> component_origin_;
 };
+
+// The side of a query point p of a shape at its rest positions (a body that does not move),
+// from p's exact closest point: `closest` on `triangle`, `feature` holding it, at `distance`
+// (QueryStream::closest()'s answer, or the first hit of kClosest() or within()). Returns -1
+// inside, +1 outside, 0 when the shape is not closed() (no sign). The rule of the service's
+// hits (DistanceHit::sign): the closest feature's pseudonormal (any closest point gives the same
+// side on a closed surface); a point within 16 eps times its largest coordinate of the surface
+// is on it, and outside, and so is a point outside the rest box by more than that (far away,
+// the distances of opposite faces tie in doubles).
+int restSide(const BodyShape& shape, const Vec3& p, TriangleIndex triangle, Feature feature, const Vec3& closest,
+             double distance);
+// The same from an exact answer (not an anytime one with a tolerance: its point is not the
+// closest), or the first hit of kClosest() or within().
+inline int restSide(const BodyShape& shape, const Vec3& p, const ClosestPoint& c) {
+  return restSide(shape, p, c.triangle, c.feature, c.point, c.distance);
+}
+inline int restSide(const BodyShape& shape, const Vec3& p, const TriangleHit& first) {
+  return restSide(shape, p, first.triangle, first.feature, first.point, first.distance);
+}
 
 // The unit normal of triangle (a, b, c) (right-hand rule), zero when its area is zero.
 Vec3 unitFaceNormal(const Vec3& a, const Vec3& b, const Vec3& c);

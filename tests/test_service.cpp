@@ -561,20 +561,27 @@ TEST_CASE("closest mode's pruning keeps the bodies rounding could order either w
   CHECK(compared == 2400);
 }
 
-TEST_CASE("sign from pseudonormals equals the winding number on closed meshes", "[service][sign]") {
-  struct Case {
-    std::string name;
-    Mesh mesh;
-    size_t points;
-  };
-  std::vector<Case> cases;
-  cases.push_back({"icosphere", scenes::icosphere(3, 1.0), 1500});
-  cases.push_back({"torus", scenes::torus(1.0, 0.35, 32, 16), 1500});
-  if (const Mesh* armadillo = realMesh("armadillo")) cases.push_back({"armadillo", *armadillo, 200});
-  // Faces pointing inward (winding number -1 inside): the same solid, normals flipped.
+// Closed meshes for the sign tests, with a number of query points each: a sphere, a torus, the
+// torus with its faces pointing inward (winding number -1 inside: the same solid, normals
+// flipped), and the armadillo when the bundled meshes are there.
+struct SignCase {
+  std::string name;
+  Mesh mesh;
+  size_t points;
+};
+std::vector<SignCase> closedSignCases(size_t points) {
+  std::vector<SignCase> cases;
+  cases.push_back({"icosphere", scenes::icosphere(3, 1.0), points});
+  cases.push_back({"torus", scenes::torus(1.0, 0.35, 32, 16), points});
   Mesh inverted = scenes::torus(1.0, 0.35, 32, 16);
   for (Triangle& t : inverted.triangles) std::swap(t[1], t[2]);
-  cases.push_back({"inverted torus", inverted, 1000});
+  cases.push_back({"inverted torus", inverted, 2 * points / 3});
+  if (const Mesh* armadillo = realMesh("armadillo")) cases.push_back({"armadillo", *armadillo, 200});
+  return cases;
+}
+
+TEST_CASE("sign from pseudonormals equals the winding number on closed meshes", "[service][sign]") {
+  std::vector<SignCase> cases = closedSignCases(1500);
   // A hollow ball: an outward sphere around an inward one (its cavity is outside the solid;
   // the volume is positive, nothing is flipped).
   Mesh hollow = scenes::icosphere(3, 1.0);
@@ -585,7 +592,7 @@ TEST_CASE("sign from pseudonormals equals the winding number on closed meshes", 
     for (const Triangle& t : inner.triangles) hollow.triangles.push_back({base + t[0], base + t[2], base + t[1]});
   }
   cases.push_back({"hollow ball", hollow, 1500});
-  for (const Case& c : cases) {
+  for (const SignCase& c : cases) {
     INFO(c.name);
     DistanceService service(ServiceOptions{2, 64});
     const auto hierarchy = service.hierarchyFor(c.mesh);
@@ -641,6 +648,93 @@ TEST_CASE("sign from pseudonormals equals the winding number on closed meshes", 
       CHECK(inside > points.size() / 10);
       CHECK(outside > points.size() / 10);
     }
+  }
+}
+
+// restSide: the side of a point of a mesh that does not move, from a QueryStream's closest
+// point (what `meshsweep closest --signed` prints), against the winding number, the service's
+// sign for a body at the identity pose, and the first hit of kClosest and within.
+TEST_CASE("restSide signs a static mesh's closest points like the winding number and the service", "[service][sign]") {
+  std::vector<SignCase> cases = closedSignCases(1200);
+  Mesh far = scenes::icosphere(2, 1e-3);  // small, far from the origin
+  for (Vec3& x : far.positions) x += Vec3(250, -120, 75);
+  cases.push_back({"far small ball", far, 600});
+  for (const SignCase& c : cases) {
+    INFO(c.name);
+    DistanceService service(ServiceOptions{1, 64});
+    const auto hierarchy = service.hierarchyFor(c.mesh);
+    const std::shared_ptr<const BodyShape> shape = BodyShape::build(hierarchy);
+    REQUIRE(shape->closed());
+    service.addRigid(hierarchy);
+    std::vector<Vec3> points = scenes::nearSurfacePoints(c.mesh, c.points / 2, 0.01, 21);
+    const std::vector<Vec3> box = scenes::randomPointsInBox(c.mesh, c.points / 2, 0.05, 22);
+    points.insert(points.end(), box.begin(), box.end());
+    const size_t off_surface = points.size();
+    Vec3 lower, upper;
+    meshBounds(c.mesh, lower, upper);
+    const double diagonal = (upper - lower).norm();
+    // Far: outside (at 1e17 diagonals opposite faces tie in doubles: the box decides).
+    for (const double reach : {1e6, 1e17})
+      for (const Vec3& direction : {Vec3(1, 0, 0), Vec3(-0.3, 0.9, 0.1), Vec3(0, 0, -1)})
+        points.push_back(0.5 * (lower + upper) + reach * diagonal * direction);
+    const size_t far_end = points.size();
+    // On the surface: vertices, edge midpoints and face centroids.
+    for (size_t f = 0; f < c.mesh.triangles.size(); f += 7) {
+      const Triangle& t = c.mesh.triangles[f];
+      const Vec3 &a = c.mesh.positions[t[0]], &b = c.mesh.positions[t[1]], &d = c.mesh.positions[t[2]];
+      points.insert(points.end(), {a, 0.5 * (a + b), (a + b + d) / 3});
+    }
+    const StepResult result = service.step(toMatrix(points), kInf, QueryMode::kClosest);
+    QueryStream stream(hierarchy);
+    std::vector<TriangleHit> hits;
+    Failures failures("restSide on " + c.name);
+    size_t inside = 0, outside = 0;
+    for (size_t i = 0; i < points.size(); ++i) {
+      const Vec3& p = points[i];
+      const ClosestPoint closest = stream.closest(p);
+      const int side = restSide(*shape, p, closest);
+      const auto where = [&] { return "point " + text(p) + ", distance " + std::to_string(closest.distance); };
+      // Every closest point's feature gives the point's side: so do k-closest's and within's first hits.
+      stream.kClosest(p, 3, hits);
+      failures.check(!hits.empty() && restSide(*shape, p, hits[0]) == side,
+                     [&] { return where() + ": kClosest's first hit gives another side"; });
+      stream.within(p, closest.distance * (1 + 1e-9) + 1e-300, hits);
+      failures.check(!hits.empty() && restSide(*shape, p, hits[0]) == side,
+                     [&] { return where() + ": within's first hit gives another side"; });
+      const DistanceHit* hit = result.closest(i);
+      REQUIRE(hit != nullptr);
+      if (i >= far_end) {  // on the surface: outside
+        failures.check(side == 1, [&] { return where() + ": on the surface, side " + std::to_string(side); });
+        failures.check(hit->sign == HitSign::kOutside, [&] { return where() + ": the service's sign"; });
+        continue;
+      }
+      if (i >= off_surface) {
+        failures.check(side == 1, [&] { return where() + ": far away, side " + std::to_string(side); });
+        continue;
+      }
+      const double w = windingNumber(c.mesh, p);
+      if (closest.distance < 1e-9 * diagonal || std::abs(w - 0.5) < 0.25) continue;  // on the surface
+      const int expected = std::abs(w) > 0.5 ? -1 : 1;
+      (expected < 0 ? inside : outside) += 1;
+      failures.check(side == expected, [&] {
+        return where() + ": winding number " + std::to_string(w) + ", side " + std::to_string(side);
+      });
+      failures.check(int(hit->sign) == side, [&] { return where() + ": the service's sign differs"; });
+    }
+    CHECK(inside > c.points / 10);
+    CHECK(outside > c.points / 10);
+  }
+  // An open mesh has no side.
+  Mesh open = scenes::torus(1.0, 0.35, 32, 16);
+  open.triangles.pop_back();
+  const auto open_hierarchy = Hierarchy::build(open);
+  const auto open_shape = BodyShape::build(open_hierarchy);
+  REQUIRE_FALSE(open_shape->closed());
+  CHECK_THAT(open_shape->openReason(), Catch::Contains("boundary"));
+  QueryStream stream(open_hierarchy);
+  for (const Vec3& p : {Vec3(1, 0, 0), Vec3(3, 0, 0)}) {
+    const ClosestPoint c = stream.closest(p);
+    CHECK(restSide(*open_shape, p, c) == 0);
   }
 }
 

@@ -1,4 +1,5 @@
 // meshsweep closest: closest points of a mesh to a list of query points, as CSV.
+#include "collision/body.h"
 #include "core/mesh_io.h"
 #include "core/sweep_query.h"
 #include "tools/commands.h"
@@ -11,7 +12,7 @@ namespace meshsweeper::cli {
 
 const char kClosestHelp[] =
     "Usage: meshsweep closest MESH POINTS [--out FILE] [--tolerance T | --k N | --within D]\n"
-    "                         [--path]\n"
+    "                         [--path] [--signed]\n"
     "\n"
     "Reads MESH (OFF, OBJ, PLY or STL) and POINTS (text, one 'x y z' per line, '#' comments;\n"
     "'-' reads standard input), builds the hierarchy once and answers every point with one\n"
@@ -30,6 +31,14 @@ const char kClosestHelp[] =
     "                  --tolerance and --k: the paper's dynamic front). Same answers, less\n"
     "                  work per point; the summary adds the coherence counters. Not with\n"
     "                  --within\n"
+    "  --signed        add the columns sign,signed_distance: -1 inside, 1 outside a closed\n"
+    "                  mesh (from the angle-weighted pseudonormal at the closest point's\n"
+    "                  vertex, edge or face; a point on the surface, up to 16 eps times its\n"
+    "                  coordinates, is outside). Every row of a point has the point's sign.\n"
+    "                  The mesh must be closed (each edge in two faces, oriented alike,\n"
+    "                  manifold vertices, no degenerate face, no self-intersection,\n"
+    "                  enclosing a volume), else exit status 1 with the reason. Not with\n"
+    "                  --tolerance\n"
     "\n"
     "CSV columns (header line first):\n"
     "  point,rank,distance,lower,upper,triangle,x,y,z,b0,b1,b2\n"
@@ -41,6 +50,7 @@ const char kClosestHelp[] =
     "            k - 2 triangles: its fan (c0,c1,c2), (c0,c2,c3), ... where c0 sees the whole\n"
     "            polygon, else it is cut into ears (README \"Mesh input\")\n"
     "  x,y,z     the closest point; b0,b1,b2 its barycentric coordinates in that triangle\n"
+    "  sign, signed_distance   with --signed: -1 or 1, and sign x distance\n"
     "Numbers are printed with 17 significant digits. A point with no triangle within D\n"
     "prints no row.\n"
     "\n"
@@ -48,6 +58,8 @@ const char kClosestHelp[] =
     "  {\"mesh\": ..., \"vertices\": ..., \"triangles\": ..., \"points\": ..., \"rows\": ...,\n"
     "   \"build_seconds\": ..., \"query_seconds\": ..., \"mode\": ..., \"path\": ...}\n"
     "  with --path also \"certified\", \"rebuilds\", \"searched\", \"front_resets\" (coherence counters)\n"
+    "  with --signed also \"inside\" (points inside); build_seconds then includes the\n"
+    "  closedness check and pseudonormals\n"
     "\n"
     "Exit status: 0 success, 1 unreadable/invalid input file or unwritable output,\n"
     "2 bad command line.\n";
@@ -74,15 +86,17 @@ struct Row {
   TriangleIndex triangle;  // [triangle] file order after triangulation (mesh_io.h)
   Vec3 position;
   Vec3 barycentric;
+  Feature feature;
+  int side = 0;  // --signed: the point's side (restSide), -1 inside or 1 outside
 };
 
 Row rowFromHit(uint32_t point, uint32_t rank, const TriangleHit& hit) {
   return {point, rank, hit.distance, hit.distance, hit.distance, hit.triangle, hit.point,
-          hit.barycentric};
+          hit.barycentric, hit.feature};
 }
 
 Row rowFromClosest(uint32_t point, const ClosestPoint& c) {
-  return {point, 0, c.distance, c.lower, c.upper, c.triangle, c.point, c.barycentric};
+  return {point, 0, c.distance, c.lower, c.upper, c.triangle, c.point, c.barycentric, c.feature};
 }
 
 }  // namespace
@@ -90,7 +104,7 @@ Row rowFromClosest(uint32_t point, const ClosestPoint& c) {
 int runClosest(int argc, char** argv, int first) {
   const Args args("closest", argc, argv, first,
                   {{"--out", true}, {"--tolerance", true}, {"--k", true}, {"--within", true},
-                   {"--path", false}});
+                   {"--path", false}, {"--signed", false}});
   args.expectPositional({"MESH", "POINTS"});
   const std::string& mesh_path = args.positional()[0];
   const std::string& points_path = args.positional()[1];
@@ -120,6 +134,10 @@ int runClosest(int argc, char** argv, int first) {
   // This tool answers --within with plain within() only: --path would be silently ignored.
   if (path && mode == Mode::kWithin)
     throw UsageError("closest: --path cannot be combined with --within");
+  // An anytime answer's point is not the closest one, whose feature decides the side.
+  const bool signed_rows = args.has("--signed");
+  if (signed_rows && mode == Mode::kAnytime)
+    throw UsageError("closest: --signed needs exact closest points: it cannot be combined with --tolerance");
 
   const Mesh mesh = readMesh(mesh_path);
   const std::vector<Vec3> points = readPoints(points_path);
@@ -129,6 +147,13 @@ int runClosest(int argc, char** argv, int first) {
 
   const Timer build_timer;
   const std::shared_ptr<const Hierarchy> hierarchy = Hierarchy::build(mesh);
+  std::shared_ptr<const BodyShape> shape;
+  if (signed_rows) {
+    shape = BodyShape::build(hierarchy);
+    if (!shape->closed())
+      throw MeshError(mesh_path + ": distances cannot be signed: the mesh is not closed (" +
+                      shape->openReason() + ")");
+  }
   const double build_seconds = build_timer.seconds();
 
   // The hierarchy never has more triangles than the mesh: asking for more changes nothing.
@@ -139,14 +164,17 @@ int runClosest(int argc, char** argv, int first) {
   constexpr size_t kBatchRows = 1 << 16;
   std::vector<Row> rows;
   rows.reserve(kBatchRows);
-  size_t total_rows = 0;
+  size_t total_rows = 0, inside = 0;
   double query_seconds = 0;
-  out.write("point,rank,distance,lower,upper,triangle,x,y,z,b0,b1,b2\n");
+  out.write(signed_rows ? "point,rank,distance,lower,upper,triangle,x,y,z,b0,b1,b2,sign,signed_distance\n"
+                        : "point,rank,distance,lower,upper,triangle,x,y,z,b0,b1,b2\n");
   const auto writeRows = [&] {
     for (const Row& r : rows) {
-      out.printf("%u,%u,%.17g,%.17g,%.17g,%u,%.17g,%.17g,%.17g,%.17g,%.17g,%.17g\n", r.point,
+      out.printf("%u,%u,%.17g,%.17g,%.17g,%u,%.17g,%.17g,%.17g,%.17g,%.17g,%.17g", r.point,
                  r.rank, r.distance, r.lower, r.upper, r.triangle, r.position.x(), r.position.y(),
                  r.position.z(), r.barycentric.x(), r.barycentric.y(), r.barycentric.z());
+      if (signed_rows) out.printf(",%d,%.17g", r.side, r.side * r.distance);
+      out.write("\n");
     }
     total_rows += rows.size();
     rows.clear();
@@ -156,6 +184,7 @@ int runClosest(int argc, char** argv, int first) {
   Timer query_timer;
   for (uint32_t i = 0; i < points.size(); ++i) {
     const Vec3& p = points[i];
+    const size_t point_rows = rows.size();  // the point's rows: rows[point_rows, end)
     switch (mode) {
       case Mode::kClosest:
         rows.push_back(rowFromClosest(i, path ? stream.closestCoherent(p) : stream.closest(p)));
@@ -177,6 +206,13 @@ int runClosest(int argc, char** argv, int first) {
           rows.push_back(rowFromHit(i, rank, hits[rank]));
         break;
     }
+    // The point's first row is its closest point (within and k rows come by distance).
+    if (signed_rows && rows.size() > point_rows && rows[point_rows].triangle != kInvalidIndex) {
+      const Row& first = rows[point_rows];
+      const int side = restSide(*shape, p, first.triangle, first.feature, first.position, first.distance);
+      for (size_t r = point_rows; r < rows.size(); ++r) rows[r].side = side;
+      inside += side < 0;
+    }
     if (rows.size() >= kBatchRows) {
       query_seconds += query_timer.seconds();
       writeRows();
@@ -188,9 +224,10 @@ int runClosest(int argc, char** argv, int first) {
   out.close();
 
   std::string coherence;
+  if (signed_rows) coherence = ", \"inside\": " + std::to_string(inside);
   if (path) {
     const CoherenceCounters& c = stream.coherence();
-    coherence = ", \"certified\": " + std::to_string(c.certified) + ", \"rebuilds\": " +
+    coherence += ", \"certified\": " + std::to_string(c.certified) + ", \"rebuilds\": " +
                 std::to_string(c.rebuilds) + ", \"searched\": " + std::to_string(c.searched) +
                 ", \"front_resets\": " + std::to_string(c.front_resets);
   }

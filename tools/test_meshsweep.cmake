@@ -163,6 +163,38 @@ check(within RC 0 ARGS closest quad.off points.txt --within 1.5
 check(within_none RC 0 ARGS closest quad.off points.txt --within 0 OUT "${header}"
   NOT_OUT "\n0," ERR "\"rows\": 0")
 
+# Signed: a closed octahedron (|x| + |y| + |z| = 1, faces outward; inward, the same solid):
+# (0.1, 0.1, 0.1) is inside, 0.7 / sqrt(3) from face 0; (1, 1, 1) outside, 2 / sqrt(3) from it;
+# the vertex (1, 0, 0) on the surface (outside, signed distance 0). Every row of a point has the
+# point's sign. The quad is open: refused with the reason, exit status 1.
+set(octahedron_faces "3 0 2 4\n3 1 4 2\n3 0 4 3\n3 1 3 4\n3 0 5 2\n3 1 2 5\n3 0 3 5\n3 1 5 3\n")
+file(WRITE "${WORK_DIR}/octahedron.off"
+  "OFF\n6 8 0\n1 0 0\n-1 0 0\n0 1 0\n0 -1 0\n0 0 1\n0 0 -1\n${octahedron_faces}")
+string(REGEX REPLACE "3 ([0-9]) ([0-9]) ([0-9])" "3 \\1 \\3 \\2" inward_faces "${octahedron_faces}")
+file(WRITE "${WORK_DIR}/octahedron_inward.off"
+  "OFF\n6 8 0\n1 0 0\n-1 0 0\n0 1 0\n0 -1 0\n0 0 1\n0 0 -1\n${inward_faces}")
+file(WRITE "${WORK_DIR}/sides.txt" "0.1 0.1 0.1\n1 1 1\n1 0 0\n")
+set(signed_header "point,rank,distance,lower,upper,triangle,x,y,z,b0,b1,b2,sign,signed_distance\n")
+foreach(mesh octahedron octahedron_inward)
+  check(signed_${mesh} RC 0 ARGS closest ${mesh}.off sides.txt --signed
+    OUT "${signed_header}0,0,0.40414518843273806," ",-1,-0.40414518843273806\n"
+        "\n1,0,1.1547005383792517," ",1,1.1547005383792517\n" "\n2,0,0,0,0," ",1,0\n"
+    ERR "\"rows\": 3" "\"inside\": 1")
+endforeach()
+check(signed_path RC 0 ARGS closest octahedron.off sides.txt --signed --path
+  OUT ",-1,-0.40414518843273806\n" ",1,1.1547005383792517\n" ERR "\"inside\": 1" "\"certified\": ")
+check(signed_k RC 0 ARGS closest octahedron.off sides.txt --signed --k 2
+  OUT "\n0,1,0.51961524227066314," ",-1,-0.51961524227066314\n" "\n1,1,1.2247448713915889," ",1,1.2247448713915889\n"
+  ERR "\"rows\": 6")
+check(signed_within RC 0 ARGS closest octahedron.off sides.txt --signed --within 0.5
+  OUT ",-1,-0.40414518843273806\n" "\n2,3,0,0,0,6," NOT_OUT "\n1,"
+  ERR "\"rows\": 5" "\"inside\": 1")
+check(unsigned_columns RC 0 ARGS closest octahedron.off sides.txt OUT "${header}" NOT_OUT "sign" NOT_ERR "inside")
+check(signed_open RC 1 ARGS closest quad.off points.txt --signed
+  ERR "meshsweep: quad.off: distances cannot be signed: the mesh is not closed (edge (0, 1) has 1 face (boundary))")
+check(signed_tolerance RC 2 ARGS closest octahedron.off sides.txt --signed --tolerance 0.1
+  ERR "--signed needs exact closest points")
+
 # Help.
 check(help RC 0 ARGS help OUT "closest" "sample")
 check(help_flag RC 0 ARGS --help OUT "Usage: meshsweep COMMAND")
