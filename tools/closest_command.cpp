@@ -2,9 +2,15 @@
 #include "collision/body.h"
 #include "core/mesh_io.h"
 #include "core/sweep_query.h"
+#include "core/threads.h"
 #include "tools/commands.h"
 
+#include <tbb/enumerable_thread_specific.h>
+#include <tbb/parallel_for.h>
+#include <tbb/task_arena.h>
+
 #include <algorithm>
+#include <atomic>
 #include <cstdio>
 #include <limits>
 
@@ -12,11 +18,11 @@ namespace meshsweeper::cli {
 
 const char kClosestHelp[] =
     "Usage: meshsweep closest MESH POINTS [--out FILE] [--tolerance T | --k N | --within D]\n"
-    "                         [--path] [--signed]\n"
+    "                         [--path] [--signed] [--threads N]\n"
     "\n"
     "Reads MESH (OFF, OBJ, PLY or STL) and POINTS (text, one 'x y z' per line, '#' comments;\n"
-    "'-' reads standard input), builds the hierarchy once and answers every point with one\n"
-    "query stream.\n"
+    "'-' reads standard input), builds the hierarchy once and answers the points in parallel\n"
+    "(one query stream per thread; the rows do not depend on the threads).\n"
     "\n"
     "Modes (at most one):\n"
     "  (none)          exact closest point                               mode \"closest\"\n"
@@ -26,11 +32,12 @@ const char kClosestHelp[] =
     "  --k N           the N closest triangles (N >= 1), one row each    mode \"k\"\n"
     "  --within D      every triangle at distance <= D, one row each     mode \"within\"\n"
     "  --out FILE      write the CSV to FILE instead of standard output\n"
+    "  --threads N     worker threads, 0 = all (default)\n"
     "  --path          the points are consecutive samples of one moving point: answer them\n"
     "                  with one coherent stream (closest: the certified candidate set;\n"
     "                  --tolerance and --k: the paper's dynamic front). Same answers, less\n"
     "                  work per point; the summary adds the coherence counters. Not with\n"
-    "                  --within\n"
+    "                  --within; one thread (--threads 1, if given)\n"
     "  --signed        add the columns sign,signed_distance: -1 inside, 1 outside a closed\n"
     "                  mesh (from the angle-weighted pseudonormal at the closest point's\n"
     "                  vertex, edge or face; a point on the surface, up to 16 eps times its\n"
@@ -56,7 +63,8 @@ const char kClosestHelp[] =
     "\n"
     "A one-line JSON summary goes to standard error:\n"
     "  {\"mesh\": ..., \"vertices\": ..., \"triangles\": ..., \"points\": ..., \"rows\": ...,\n"
-    "   \"build_seconds\": ..., \"query_seconds\": ..., \"mode\": ..., \"path\": ...}\n"
+    "   \"build_seconds\": ..., \"query_seconds\": ..., \"mode\": ..., \"path\": ...,\n"
+    "   \"threads\": ...}  (query_seconds: wall-clock time of the queries)\n"
     "  with --path also \"certified\", \"rebuilds\", \"searched\", \"front_resets\" (coherence counters)\n"
     "  with --signed also \"inside\" (points inside); build_seconds then includes the\n"
     "  closedness check and pseudonormals\n"
@@ -104,7 +112,7 @@ Row rowFromClosest(uint32_t point, const ClosestPoint& c) {
 int runClosest(int argc, char** argv, int first) {
   const Args args("closest", argc, argv, first,
                   {{"--out", true}, {"--tolerance", true}, {"--k", true}, {"--within", true},
-                   {"--path", false}, {"--signed", false}});
+                   {"--path", false}, {"--signed", false}, {"--threads", true}});
   args.expectPositional({"MESH", "POINTS"});
   const std::string& mesh_path = args.positional()[0];
   const std::string& points_path = args.positional()[1];
@@ -134,6 +142,10 @@ int runClosest(int argc, char** argv, int first) {
   // This tool answers --within with plain within() only: --path would be silently ignored.
   if (path && mode == Mode::kWithin)
     throw UsageError("closest: --path cannot be combined with --within");
+  // A path is one moving point: one stream answers its samples in order.
+  const unsigned threads = args.has("--threads") ? static_cast<unsigned>(args.integer("--threads", 0, 4096)) : 0;
+  if (path && args.has("--threads") && threads != 1)
+    throw UsageError("closest: --path answers its points in order with one stream: --threads must be 1 with it");
   // An anytime answer's point is not the closest one, whose feature decides the side.
   const bool signed_rows = args.has("--signed");
   if (signed_rows && mode == Mode::kAnytime)
@@ -158,17 +170,21 @@ int runClosest(int argc, char** argv, int first) {
 
   // The hierarchy never has more triangles than the mesh: asking for more changes nothing.
   const size_t k_effective = static_cast<size_t>(std::min<uint64_t>(k, mesh.triangles.size()));
-  // Rows are written as they come, a batch at a time (--within or --k can give many rows per
-  // point: 200 points within 1e9 of the armadillo are 10 million rows, which a review ran out
-  // of memory holding); query_seconds counts the queries only.
+  // Points are answered a chunk at a time, in blocks of kBlockPoints run in parallel (one query
+  // stream per thread; every answer is exact and ties go to the lowest triangle, so the rows do
+  // not depend on the threads), and the chunk's rows written in point order. A chunk holds
+  // about kBatchRows rows (--within or --k can give many rows per point: 200 points within 1e9
+  // of the armadillo are 10 million rows, which a review ran out of memory holding): its size
+  // follows the rows per point of the chunk before. query_seconds counts the queries only.
   constexpr size_t kBatchRows = 1 << 16;
-  std::vector<Row> rows;
-  rows.reserve(kBatchRows);
-  size_t total_rows = 0, inside = 0;
+  constexpr size_t kBlockPoints = 64;
+  constexpr size_t kMaxChunk = 16384;  // points
+  size_t total_rows = 0;
+  std::atomic<size_t> inside{0};
   double query_seconds = 0;
   out.write(signed_rows ? "point,rank,distance,lower,upper,triangle,x,y,z,b0,b1,b2,sign,signed_distance\n"
                         : "point,rank,distance,lower,upper,triangle,x,y,z,b0,b1,b2\n");
-  const auto writeRows = [&] {
+  const auto writeRows = [&](const std::vector<Row>& rows) {
     for (const Row& r : rows) {
       out.printf("%u,%u,%.17g,%.17g,%.17g,%u,%.17g,%.17g,%.17g,%.17g,%.17g,%.17g", r.point,
                  r.rank, r.distance, r.lower, r.upper, r.triangle, r.position.x(), r.position.y(),
@@ -177,56 +193,95 @@ int runClosest(int argc, char** argv, int first) {
       out.write("\n");
     }
     total_rows += rows.size();
-    rows.clear();
   };
-  std::vector<TriangleHit> hits;
-  QueryStream stream(hierarchy);
-  Timer query_timer;
-  for (uint32_t i = 0; i < points.size(); ++i) {
-    const Vec3& p = points[i];
-    const size_t point_rows = rows.size();  // the point's rows: rows[point_rows, end)
-    switch (mode) {
-      case Mode::kClosest:
-        rows.push_back(rowFromClosest(i, path ? stream.closestCoherent(p) : stream.closest(p)));
-        break;
-      case Mode::kAnytime:
-        rows.push_back(rowFromClosest(i, path ? stream.closestWithinCoherent(p, tolerance)
-                                              : stream.closestWithin(p, tolerance)));
-        break;
-      case Mode::kK:
-      case Mode::kWithin:
-        hits.clear();
-        if (mode == Mode::kK && path)
-          stream.kClosestCoherent(p, k_effective, hits);
-        else if (mode == Mode::kK)
-          stream.kClosest(p, k_effective, hits);
-        else
-          stream.within(p, within_distance, hits);
-        for (uint32_t rank = 0; rank < hits.size(); ++rank)
-          rows.push_back(rowFromHit(i, rank, hits[rank]));
-        break;
+  // Answers points [first, last) with `stream`, appending their rows to `rows`.
+  const auto answer = [&](QueryStream& stream, std::vector<TriangleHit>& hits, uint32_t first, uint32_t last,
+                          std::vector<Row>& rows) {
+    size_t block_inside = 0;
+    for (uint32_t i = first; i < last; ++i) {
+      const Vec3& p = points[i];
+      const size_t point_rows = rows.size();  // the point's rows: rows[point_rows, end)
+      switch (mode) {
+        case Mode::kClosest:
+          rows.push_back(rowFromClosest(i, path ? stream.closestCoherent(p) : stream.closest(p)));
+          break;
+        case Mode::kAnytime:
+          rows.push_back(rowFromClosest(i, path ? stream.closestWithinCoherent(p, tolerance)
+                                                : stream.closestWithin(p, tolerance)));
+          break;
+        case Mode::kK:
+        case Mode::kWithin:
+          hits.clear();
+          if (mode == Mode::kK && path)
+            stream.kClosestCoherent(p, k_effective, hits);
+          else if (mode == Mode::kK)
+            stream.kClosest(p, k_effective, hits);
+          else
+            stream.within(p, within_distance, hits);
+          for (uint32_t rank = 0; rank < hits.size(); ++rank)
+            rows.push_back(rowFromHit(i, rank, hits[rank]));
+          break;
+      }
+      // The point's first row is its closest point (within and k rows come by distance).
+      if (signed_rows && rows.size() > point_rows && rows[point_rows].triangle != kInvalidIndex) {
+        const Row& closest = rows[point_rows];
+        const int side = restSide(*shape, p, closest.triangle, closest.feature, closest.position, closest.distance);
+        for (size_t r = point_rows; r < rows.size(); ++r) rows[r].side = side;
+        block_inside += side < 0;
+      }
     }
-    // The point's first row is its closest point (within and k rows come by distance).
-    if (signed_rows && rows.size() > point_rows && rows[point_rows].triangle != kInvalidIndex) {
-      const Row& first = rows[point_rows];
-      const int side = restSide(*shape, p, first.triangle, first.feature, first.position, first.distance);
-      for (size_t r = point_rows; r < rows.size(); ++r) rows[r].side = side;
-      inside += side < 0;
+    inside += block_inside;
+  };
+
+  // --path: one stream follows the points in order, on this thread.
+  QueryStream path_stream(hierarchy);
+  std::vector<TriangleHit> path_hits;
+  tbb::task_arena arena(arenaConcurrency(path ? 1 : threads));
+  const int thread_count = path ? 1 : arena.max_concurrency();
+  struct Worker {
+    QueryStream stream;
+    std::vector<TriangleHit> hits;
+  };
+  tbb::enumerable_thread_specific<Worker> workers([&] { return Worker{QueryStream(hierarchy), {}}; });
+  std::vector<std::vector<Row>> block_rows;
+  size_t chunk = 4 * kBlockPoints;
+  for (size_t first = 0; first < points.size();) {
+    const size_t last = std::min(points.size(), first + chunk);
+    const size_t blocks = (last - first + kBlockPoints - 1) / kBlockPoints;
+    block_rows.assign(blocks, {});
+    const Timer query_timer;
+    const auto block = [&](size_t b, QueryStream& stream, std::vector<TriangleHit>& hits) {
+      const size_t from = first + b * kBlockPoints;
+      answer(stream, hits, static_cast<uint32_t>(from), static_cast<uint32_t>(std::min(last, from + kBlockPoints)),
+             block_rows[b]);
+    };
+    if (path) {
+      for (size_t b = 0; b < blocks; ++b) block(b, path_stream, path_hits);
+    } else {
+      arena.execute([&] {
+        tbb::parallel_for(size_t(0), blocks, [&](size_t b) {
+          Worker& w = workers.local();
+          block(b, w.stream, w.hits);
+        });
+      });
     }
-    if (rows.size() >= kBatchRows) {
-      query_seconds += query_timer.seconds();
-      writeRows();
-      query_timer = Timer();
+    query_seconds += query_timer.seconds();
+    size_t chunk_rows = 0;
+    for (const std::vector<Row>& rows : block_rows) {
+      writeRows(rows);
+      chunk_rows += rows.size();
     }
+    chunk = chunk_rows == 0 ? kMaxChunk
+                            : std::clamp<size_t>((last - first) * kBatchRows / chunk_rows, kBlockPoints, kMaxChunk);
+    first = last;
   }
-  query_seconds += query_timer.seconds();
-  writeRows();
+  block_rows.clear();
   out.close();
 
   std::string coherence;
-  if (signed_rows) coherence = ", \"inside\": " + std::to_string(inside);
+  if (signed_rows) coherence = ", \"inside\": " + std::to_string(inside.load());
   if (path) {
-    const CoherenceCounters& c = stream.coherence();
+    const CoherenceCounters& c = path_stream.coherence();
     coherence += ", \"certified\": " + std::to_string(c.certified) + ", \"rebuilds\": " +
                 std::to_string(c.rebuilds) + ", \"searched\": " + std::to_string(c.searched) +
                 ", \"front_resets\": " + std::to_string(c.front_resets);
@@ -234,10 +289,10 @@ int runClosest(int argc, char** argv, int first) {
   std::fprintf(stderr,
                "{\"mesh\": %s, \"vertices\": %zu, \"triangles\": %zu, \"points\": %zu, "
                "\"rows\": %zu, \"build_seconds\": %.6f, \"query_seconds\": %.6f, "
-               "\"mode\": \"%s\", \"path\": %s%s}\n",
+               "\"mode\": \"%s\", \"path\": %s, \"threads\": %d%s}\n",
                jsonString(mesh_path).c_str(), mesh.positions.size(), mesh.triangles.size(),
                points.size(), total_rows, build_seconds, query_seconds, modeName(mode),
-               path ? "true" : "false", coherence.c_str());
+               path ? "true" : "false", thread_count, coherence.c_str());
   return kExitOk;
 }
 

@@ -287,6 +287,52 @@ check(sample_near_limit RC 0 ARGS sample quad.off 50 --near 7.07106e149 --out sa
 check(sample_near_limit_closest RC 0 ARGS closest quad.off sample_near_limit.txt
   ERR "\"rows\": 50")
 
+# Threads: the rows do not depend on them (one stream per thread, blocks of 64 points, written
+# in point order; the chunks follow the rows per point). Points over the quad tie between its
+# triangles along the diagonal and at the vertices; --within 1e9 gives two rows per point.
+check(threads_sample RC 0 ARGS sample quad.off 3000 --near 0.3 --seed 7 --out threads_points.txt)
+file(APPEND "${WORK_DIR}/threads_points.txt" "0.5 0.5 1\n1 1 0\n0 0 -0.5\n")
+# The signed rows on the closed octahedron, from points on both sides.
+check(threads_sample_signed RC 0 ARGS sample octahedron.off 3000 --near 0.3 --seed 8 --out threads_signed_points.txt)
+foreach(mode_args "closest" "closest;--k;2" "closest;--within;1e9" "closest;--within;0.1"
+                  "closest;--tolerance;0.05" "closest;--signed;--k;2")
+  string(REPLACE ";" "_" mode_name "${mode_args}")
+  set(mesh quad.off)
+  set(mode_points threads_points.txt)
+  if(mode_name MATCHES "signed")
+    set(mesh octahedron.off)
+    set(mode_points threads_signed_points.txt)
+  endif()
+  foreach(threads 1 2 0)
+    check(threads_${mode_name}_${threads} RC 0
+      ARGS ${mode_args} ${mesh} ${mode_points} --threads ${threads} --out threads_${mode_name}_${threads}.csv)
+  endforeach()
+  same_files(threads_${mode_name}_1.csv threads_${mode_name}_2.csv)
+  same_files(threads_${mode_name}_1.csv threads_${mode_name}_0.csv)
+endforeach()
+# Rows in point order, ranks in order: row r of --k 2 is point r / 2, rank r % 2.
+file(STRINGS "${WORK_DIR}/threads_closest_--k_2_2.csv" k_lines)
+list(LENGTH k_lines k_count)
+list(REMOVE_AT k_lines 0)  # the header
+set(k_order_ok TRUE)
+set(r 0)
+foreach(line IN LISTS k_lines)
+  math(EXPR point "${r} / 2")
+  math(EXPR rank "${r} % 2")
+  string(FIND "${line}" "${point},${rank}," at)
+  if(NOT at EQUAL 0)
+    set(k_order_ok FALSE)
+    break()
+  endif()
+  math(EXPR r "${r} + 1")
+endforeach()
+expect(threads_order "k_order_ok AND k_count EQUAL 6007" "--k 2 rows out of order (${k_count} lines)")
+check(threads_count RC 0 ARGS closest quad.off points.txt --threads 1 ERR "\"threads\": 1")
+check(threads_path RC 2 ARGS closest quad.off points.txt --path --threads 2
+  ERR "meshsweep: closest: --path answers its points in order with one stream: --threads must be 1 with it")
+check(threads_path_one RC 0 ARGS closest quad.off points.txt --path --threads 1 ERR "\"threads\": 1")
+check(threads_bad RC 2 ARGS closest quad.off points.txt --threads two ERR "--threads must be")
+
 # The README's library example.
 check(example RC 0 COMMAND "${EXAMPLE}" ARGS quad.off 0.75 0.25 1
   OUT "distance 1, triangle 0, point (0.75, 0.25, 0)")
