@@ -9,8 +9,11 @@
 //        per-face colour count of binary OFF and misreads every face after the first.
 //   PLY  The header is parsed and the body walked without storing anything: element counts
 //        against the file size, every list length against the bytes left (CGAL resizes to it),
-//        and the property types CGAL can read (a vertex 'x' declared 'int' makes CGAL 5.5
-//        dereference a null pointer; an unknown type makes it misread the rest of the file).
+//        every ASCII value against its type, and the property types (an unknown type makes
+//        CGAL misread the rest of the file). CGAL 5.5 reads coordinates only as float or double
+//        (an 'int x' made it dereference a null pointer) and face indices only as int or uint:
+//        a file with integer coordinates or 1- or 2-byte index items is given to CGAL re-encoded
+//        in memory, those coordinates as double and those indices as int or uint (reencodePly).
 //   STL  A binary file is read here (its triangle count must match the file size, its
 //        coordinates be finite); an ASCII file's structure is checked word by word before CGAL
 //        reads it (checkStl), and CGAL is given its text up to the last 'endsolid' line, names
@@ -793,7 +796,6 @@ struct PlyType {
   int bytes = 0;  // 0: not a PLY type
   bool integer = false;
   bool is_signed = false;
-  bool is_float() const { return bytes != 0 && !integer; }
 };
 
 PlyType plyType(std::string_view name) {
@@ -839,7 +841,15 @@ struct PlyHeader {
 bool isVertexElement(const std::string& name) { return name == "vertex" || name == "vertices"; }
 bool isFaceElement(const std::string& name) { return name == "face" || name == "faces"; }
 
-// Parses a PLY header and checks that CGAL 5.5's reader can read the elements it interprets.
+// The property a face element's corners are read from: 'vertex_indices', else 'vertex_index'
+// (CGAL's order), or null.
+const PlyProperty* plyIndexList(const PlyElement& face) {
+  const PlyProperty* p = face.find("vertex_indices");
+  return p != nullptr ? p : face.find("vertex_index");
+}
+
+// Parses a PLY header and checks that CGAL 5.5's reader can read the elements it interprets,
+// given the types it misreads re-encoded (reencodePly).
 PlyHeader parsePlyHeader(const std::string& path, std::istream& in) {
   PlyHeader header;
   std::string line;
@@ -947,17 +957,17 @@ PlyHeader parsePlyHeader(const std::string& path, std::istream& in) {
       for (const char* axis : {"x", "y", "z"}) {
         const PlyProperty* p = element.find(axis);
         if (p == nullptr) fail(path, what + " has no '" + axis + "' property");
-        if (p->list || !p->type.is_float())
-          fail(path, what + ": '" + axis + "' is " + p->type_name +
-                         "; only float or double coordinates are read");
+        // Any number type: integers are re-encoded as double for CGAL (reencodePly).
+        if (p->list) fail(path, what + ": '" + axis + "' is a list, not a coordinate");
       }
     } else if (isFaceElement(element.name)) {
       has_faces = has_faces || element.count > 0;
-      const PlyProperty* p = element.find("vertex_indices");
-      if (p == nullptr) p = element.find("vertex_index");
-      if (p == nullptr || !p->list || p->type.bytes != 4 || !p->type.integer)
-        fail(path, what + " needs a 'vertex_indices' list of int or uint (the only index types "
-                          "read)");
+      // Any integer item type: items of 1 or 2 bytes are re-encoded as int or uint for CGAL.
+      const PlyProperty* p = plyIndexList(element);
+      if (p == nullptr || !p->list || !p->type.integer)
+        fail(path, what + " needs a 'vertex_indices' list of integers" +
+                       (p == nullptr ? std::string()
+                                     : " ('" + p->name + "' is " + (p->list ? "a list of " : "") + p->type_name + ")"));
     } else if (element.name == "halfedge") {
       for (const char* end : {"source", "target"}) {
         const PlyProperty* p = element.find(end);
@@ -1138,6 +1148,205 @@ void walkAsciiPly(const std::string& path, std::istream& in, const PlyHeader& he
   if (nextPlyWord(buffer, word) && (word != "\x1a" || nextPlyWord(buffer, word)))
     fail(path, "more data (" + shown(word) + ") after the last element the header declares (wrong counts?)");
 }
+
+// ---------------------------------------------------------------------------------------------
+// PLY re-encoded for CGAL.
+
+// The type CGAL 5.5 is given for a property: its own, except a vertex coordinate of an integer
+// type (double: CGAL reads x, y and z only as float or double) and the items of a face's index
+// list of 1 or 2 bytes (int or uint by signedness: CGAL reads indices only as those). Each
+// value of the file's type is exact in the one given.
+PlyType plyTypeForCgal(const PlyElement& element, const PlyProperty& p) {
+  if (isVertexElement(element.name) && !p.list && p.type.integer && (p.name == "x" || p.name == "y" || p.name == "z"))
+    return {8, false, true};
+  if (isFaceElement(element.name) && p.list && p.type.integer && p.type.bytes < 4 && &p == plyIndexList(element))
+    return {4, true, p.type.is_signed};
+  return p.type;
+}
+
+// Whether a file has a property whose type plyTypeForCgal changes.
+bool plyNeedsReencoding(const PlyHeader& header) {
+  for (const PlyElement& element : header.elements)
+    for (const PlyProperty& p : element.properties)
+      if (plyTypeForCgal(element, p).bytes != p.type.bytes) return true;
+  return false;
+}
+
+const char* plyTypeName(const PlyType& type) {
+  if (!type.integer) return type.bytes == 4 ? "float" : "double";
+  switch (type.bytes) {
+    case 1: return type.is_signed ? "char" : "uchar";
+    case 2: return type.is_signed ? "short" : "ushort";
+    default: return type.is_signed ? "int" : "uint";
+  }
+}
+
+// The header CGAL is given with a re-encoded file: the file's elements and properties in order,
+// each type by its plain name (plyTypeForCgal's), without comments.
+std::string plyHeaderForCgal(const PlyHeader& header) {
+  std::string text = "ply\nformat ";
+  switch (header.format) {
+    case PlyFormat::kAscii: text += "ascii"; break;
+    case PlyFormat::kLittleEndian: text += "binary_little_endian"; break;
+    case PlyFormat::kBigEndian: text += "binary_big_endian"; break;
+  }
+  text += " 1.0\n";
+  for (const PlyElement& element : header.elements) {
+    text += "element " + element.name + " " + std::to_string(element.count) + "\n";
+    for (const PlyProperty& p : element.properties) {
+      text += "property ";
+      if (p.list) text += std::string("list ") + plyTypeName(p.count_type) + " ";
+      text += std::string(plyTypeName(plyTypeForCgal(element, p))) + " " + p.name + "\n";
+    }
+  }
+  return text + "end_header\n";
+}
+
+// The bits of a binary PLY value of `bytes` bytes (at most 8) in the file's byte order, and back.
+std::uint64_t plyBits(const char* data, int bytes, bool big_endian) {
+  std::uint64_t bits = 0;
+  for (int b = 0; b < bytes; ++b)
+    bits |= std::uint64_t(static_cast<unsigned char>(data[big_endian ? bytes - 1 - b : b])) << (8 * b);
+  return bits;
+}
+void putPlyBits(char* data, std::uint64_t bits, int bytes, bool big_endian) {
+  for (int b = 0; b < bytes; ++b) data[big_endian ? bytes - 1 - b : b] = static_cast<char>((bits >> (8 * b)) & 0xffu);
+}
+
+// The value of a PLY integer (of at most 4 bytes) from its bits.
+std::int64_t plyInteger(std::uint64_t bits, const PlyType& type) {
+  const int width = 8 * type.bytes;
+  if (type.is_signed && (bits >> (width - 1)) != 0) return static_cast<std::int64_t>(bits) - (std::int64_t(1) << width);
+  return static_cast<std::int64_t>(bits);
+}
+
+// A binary PLY body (the bytes after the header) with the types of plyTypeForCgal, in the file's
+// byte order: each changed value converted, every other byte copied as it is (what follows the
+// last element too). walkBinaryPly has checked the lengths; each read is bounds-checked all the
+// same. With `out` null, only counts the bytes the result takes; returns that count.
+std::uint64_t reencodePlyBody(const std::string& path, const PlyHeader& header, std::string_view body,
+                              std::string* out) {
+  const bool big_endian = header.format == PlyFormat::kBigEndian;
+  std::uint64_t at = 0;    // bytes of the body read
+  std::uint64_t size = 0;  // bytes of the result
+  const std::string changed_file = "read error (the file changed while it was read?)";
+  const auto take = [&](std::uint64_t bytes) {
+    if (bytes > body.size() - at) fail(path, changed_file);
+    const char* data = body.data() + at;
+    at += bytes;
+    return data;
+  };
+  const auto emit = [&](const char* data, std::uint64_t bytes) {
+    if (out != nullptr) out->append(data, bytes);
+    size += bytes;
+  };
+  std::vector<PlyType> types;  // CGAL's, per property
+  for (const PlyElement& element : header.elements) {
+    if (element.count == 0) continue;
+    types.clear();
+    bool changed = false, has_list = false;
+    std::uint64_t item_bytes = 0, item_bytes_out = 0;  // an item's, when it has no list
+    for (const PlyProperty& p : element.properties) {
+      types.push_back(plyTypeForCgal(element, p));
+      changed = changed || types.back().bytes != p.type.bytes;
+      has_list = has_list || p.list;
+      item_bytes += static_cast<std::uint64_t>(p.type.bytes);
+      item_bytes_out += static_cast<std::uint64_t>(types.back().bytes);
+    }
+    // Items of one size: copied whole, or counted from the header's count (the product
+    // checked: the count fits in the body).
+    if (!has_list && (!changed || out == nullptr)) {
+      if (element.count > (body.size() - at) / item_bytes) fail(path, changed_file);
+      const char* data = take(element.count * item_bytes);
+      if (!changed) {
+        emit(data, element.count * item_bytes);
+      } else {
+        if (element.count > (std::numeric_limits<std::uint64_t>::max() - size) / item_bytes_out)
+          fail(path, "too large to re-encode for reading");
+        size += element.count * item_bytes_out;
+      }
+      continue;
+    }
+    for (std::uint64_t item = 0; item < element.count; ++item) {
+      for (std::size_t k = 0; k < element.properties.size(); ++k) {
+        const PlyProperty& p = element.properties[k];
+        const PlyType& to = types[k];
+        std::uint64_t values = 1;  // list items are at most 2^32 - 1
+        if (p.list) {
+          const char* count = take(static_cast<std::uint64_t>(p.count_type.bytes));
+          const std::int64_t length = plyInteger(plyBits(count, p.count_type.bytes, big_endian), p.count_type);
+          if (length < 0) fail(path, plyItem(element, item) + ": negative list length for '" + p.name + "'");
+          values = static_cast<std::uint64_t>(length);
+          emit(count, static_cast<std::uint64_t>(p.count_type.bytes));
+        }
+        const auto from_bytes = static_cast<std::uint64_t>(p.type.bytes);
+        const auto to_bytes = static_cast<std::uint64_t>(to.bytes);
+        if (from_bytes == to_bytes || out == nullptr) {
+          const char* data = take(values * from_bytes);
+          if (from_bytes == to_bytes) emit(data, values * from_bytes);
+          else size += values * to_bytes;
+          continue;
+        }
+        for (std::uint64_t v = 0; v < values; ++v) {
+          const std::int64_t value = plyInteger(plyBits(take(from_bytes), p.type.bytes, big_endian), p.type);
+          char converted[8];
+          if (to.integer) {  // int or uint: the same bits for either
+            putPlyBits(converted, static_cast<std::uint32_t>(value), 4, big_endian);
+          } else {  // double: exact (|value| < 2^32)
+            const double d = static_cast<double>(value);
+            std::uint64_t bits;
+            std::memcpy(&bits, &d, sizeof bits);
+            putPlyBits(converted, bits, 8, big_endian);
+          }
+          emit(converted, to_bytes);
+        }
+      }
+    }
+  }
+  emit(take(body.size() - at), body.size() - at);
+  return size;
+}
+
+// The file as CGAL is given it when plyNeedsReencoding: plyHeaderForCgal's header, then the body,
+// ASCII as it is (walkAsciiPly has checked that each value is an integer of its type, which CGAL
+// reads the same as int, uint or double), binary re-encoded (reencodePlyBody). `in` is the file
+// as checked (without its byte order mark), `file_size` its size.
+std::string reencodePly(const std::string& path, std::istream& in, const PlyHeader& header,
+                        std::uint64_t file_size) {
+  const std::string cgal_header = plyHeaderForCgal(header);
+  const std::uint64_t body_size = file_size - header.body_offset;
+  in.clear();
+  in.seekg(static_cast<std::streamoff>(header.body_offset));
+  std::string text;
+  if (header.format == PlyFormat::kAscii) {
+    text.reserve(cgal_header.size() + body_size);
+    text += cgal_header;
+    text.resize(cgal_header.size() + body_size);
+    in.read(text.data() + cgal_header.size(), static_cast<std::streamsize>(body_size));
+    if (static_cast<std::uint64_t>(in.gcount()) != body_size) fail(path, "read error");
+    return text;
+  }
+  std::string body(body_size, '\0');
+  in.read(body.data(), static_cast<std::streamsize>(body_size));
+  if (static_cast<std::uint64_t>(in.gcount()) != body_size) fail(path, "read error");
+  const std::uint64_t size = reencodePlyBody(path, header, body, nullptr);
+  if (size > text.max_size() - cgal_header.size()) fail(path, "too large to re-encode for reading");
+  text.reserve(cgal_header.size() + size);
+  text += cgal_header;
+  reencodePlyBody(path, header, body, &text);
+  return text;
+}
+
+// A stream buffer that reads a string in place (std::istringstream's str() copies it).
+class StringInput : public std::streambuf {
+ public:
+  explicit StringInput(std::string text) : text_(std::move(text)) {
+    setg(text_.data(), text_.data(), text_.data() + text_.size());
+  }
+
+ private:
+  std::string text_;
+};
 
 // ---------------------------------------------------------------------------------------------
 // STL.
@@ -1446,6 +1655,10 @@ Mesh readMeshFrom(const std::string& path) {
   std::istream& in = repair.bom || repair.cr_only ? static_cast<std::istream&>(repaired) : file;
 
   OffHeader off_header;
+  // A PLY file with types CGAL 5.5 misreads, re-encoded for it (reencodePly); others go to CGAL
+  // as they are.
+  bool ply_reencoded = false;
+  std::string ply_text;
   switch (format) {
     case Format::kOff:
       off_header = checkOffHeader(path, in, file_size);
@@ -1454,6 +1667,14 @@ Mesh readMeshFrom(const std::string& path) {
       const PlyHeader header = parsePlyHeader(path, in);
       if (header.format == PlyFormat::kAscii) walkAsciiPly(path, in, header, file_size);
       else walkBinaryPly(path, in, header, file_size);
+      if (plyNeedsReencoding(header)) {
+        try {
+          ply_text = reencodePly(path, in, header, file_size);
+        } catch (const std::bad_alloc&) {
+          fail(path, "out of memory while reading");
+        }
+        ply_reencoded = true;
+      }
       break;
     }
     case Format::kStl:
@@ -1543,7 +1764,9 @@ Mesh readMeshFrom(const std::string& path) {
       from_memory = true;
     }
   }
-  std::istream& source = from_memory ? static_cast<std::istream&>(cgal_text) : in;
+  StringInput ply_buffer(std::move(ply_text));  // read in place: it may be twice the file
+  std::istream ply_source(&ply_buffer);
+  std::istream& source = ply_reencoded ? ply_source : from_memory ? static_cast<std::istream&>(cgal_text) : in;
   in.clear();
   in.seekg(0);
   if (!in) fail(path, "cannot rewind the file");
@@ -1554,7 +1777,7 @@ Mesh readMeshFrom(const std::string& path) {
     switch (format) {
       case Format::kOff: ok = CGAL::IO::read_OFF(source, points, polygons, quiet); break;
       case Format::kObj: ok = CGAL::IO::read_OBJ(source, points, polygons, quiet); break;
-      case Format::kPly: ok = CGAL::IO::read_PLY(in, points, polygons, quiet); break;
+      case Format::kPly: ok = CGAL::IO::read_PLY(source, points, polygons, quiet); break;
       case Format::kStl: ok = CGAL::IO::read_STL(source, points, polygons, quiet); break;
     }
   } catch (const TooManyCorners& e) {
@@ -1584,8 +1807,8 @@ Mesh readMeshFrom(const std::string& path) {
       fail(path, "face " + std::to_string(f) + " has " + plural(corners.size(), "corner") +
                      " (at least 3 needed)");
     for (std::size_t v : corners) {
-      // CGAL's PLY reader makes a negative int index a size_t (found by review: -1 was
-      // reported as 18446744073709551615).
+      // CGAL's PLY reader makes a negative int index (a char or short one too, re-encoded as
+      // int) a size_t (found by review: -1 was reported as 18446744073709551615).
       if (static_cast<std::int64_t>(v) < 0)
         fail(path, "face " + std::to_string(f) + " uses the negative vertex index " +
                        std::to_string(static_cast<std::int64_t>(v)));

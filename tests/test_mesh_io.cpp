@@ -16,8 +16,11 @@
 #include <fstream>
 #include <iostream>
 #include <limits>
+#include <locale>
 #include <sstream>
+#include <stdexcept>
 #include <string>
+#include <utility>
 #include <vector>
 
 using meshsweeper::Mesh;
@@ -25,6 +28,7 @@ using meshsweeper::MeshError;
 using meshsweeper::Triangle;
 using meshsweeper::Vec3;
 using Catch::Matchers::Contains;
+using Catch::Matchers::EndsWith;
 using Catch::Matchers::StartsWith;
 
 namespace {
@@ -118,6 +122,153 @@ std::string pointsError(const std::string& path) {
 //   |      |        fan of pentagon 0 1 4 5 6:  (0,1,4) (0,4,5) (0,5,6)
 //   0 ---- 1
 const std::vector<Vec3> kSquare = {{0, 0, 0}, {1, 0, 0}, {1, 1, 0}, {0, 1, 0}};
+
+// A PLY number type by name, for typedPly.
+struct PlyTestType {
+  int bytes;
+  bool integer;
+  bool is_signed;
+};
+PlyTestType plyTestType(const std::string& name) {
+  if (name == "char" || name == "int8") return {1, true, true};
+  if (name == "uchar" || name == "uint8") return {1, true, false};
+  if (name == "short" || name == "int16") return {2, true, true};
+  if (name == "ushort" || name == "uint16") return {2, true, false};
+  if (name == "int" || name == "int32") return {4, true, true};
+  if (name == "uint" || name == "uint32") return {4, true, false};
+  if (name == "float" || name == "float32") return {4, false, true};
+  if (name == "double" || name == "float64") return {8, false, true};
+  throw std::invalid_argument("no PLY type " + name);
+}
+
+enum class PlyTestFormat { kAscii, kLittleEndian, kBigEndian };
+
+// Appends a PLY value of the named type: in ASCII its text and a space, in binary its bytes in
+// the format's byte order (an integer type takes the value's two's complement bits).
+void putPly(std::string& s, PlyTestFormat format, const std::string& type_name, double value) {
+  const PlyTestType type = plyTestType(type_name);
+  if (format == PlyTestFormat::kAscii) {
+    std::ostringstream text;
+    text.imbue(std::locale::classic());
+    text.precision(17);
+    text << value << ' ';
+    s += text.str();
+    return;
+  }
+  std::uint64_t bits;
+  if (type.integer) {
+    bits = static_cast<std::uint64_t>(static_cast<std::int64_t>(value));
+  } else if (type.bytes == 4) {
+    const float f = static_cast<float>(value);
+    std::uint32_t b32;
+    std::memcpy(&b32, &f, 4);
+    bits = b32;
+  } else {
+    std::memcpy(&bits, &value, 8);
+  }
+  const bool big = format == PlyTestFormat::kBigEndian;
+  for (int b = 0; b < type.bytes; ++b) putU8(s, static_cast<unsigned>(bits >> (8 * (big ? type.bytes - 1 - b : b))));
+}
+
+// The values of the extra vertex properties after z and face properties after the list.
+const std::pair<const char*, double> kVertexExtras[] = {{"float", 0.5}, {"uchar", 1}, {"uchar", 2}, {"uchar", 255}};
+const std::pair<const char*, double> kFaceExtras[] = {{"int", -7}, {"uchar", 4}, {"uchar", 5}, {"uchar", 6}};
+
+// A PLY file of a mesh with the given types for the vertex coordinates, the face index items and
+// the face list's count. With `extras`, other properties sit around the ones read so that a wrong
+// offset shows: an element before the vertices (a list of char with a ushort count), a vertex
+// property between x and y and others after z (colours, which CGAL reads), face properties
+// before and after the list (colours too), and an element after the faces (a ushort list).
+// `line_end` ends the header's lines (and an ASCII body's).
+std::string typedPly(PlyTestFormat format, const std::string& coordinate, const std::string& index,
+                     const std::string& count, const std::vector<Vec3>& positions,
+                     const std::vector<std::vector<std::int64_t>>& faces, bool extras = true,
+                     const std::string& index_name = "vertex_indices", const std::string& line_end = "\n") {
+  const char* format_name = format == PlyTestFormat::kAscii          ? "ascii"
+                            : format == PlyTestFormat::kLittleEndian ? "binary_little_endian"
+                                                                     : "binary_big_endian";
+  std::string s = "ply" + line_end + "format " + format_name + " 1.0" + line_end + "comment typedPly" + line_end;
+  if (extras) s += "element camera 1" + line_end + "property double focal" + line_end +
+                   "property list ushort char tags" + line_end;
+  s += "element vertex " + std::to_string(positions.size()) + line_end + "property " + coordinate + " x" + line_end;
+  if (extras) s += "property short id" + line_end;
+  s += "property " + coordinate + " y" + line_end + "property " + coordinate + " z" + line_end;
+  if (extras) s += "property float confidence" + line_end + "property uchar red" + line_end +
+                   "property uchar green" + line_end + "property uchar blue" + line_end;
+  s += "element face " + std::to_string(faces.size()) + line_end;
+  if (extras) s += "property uchar kind" + line_end;
+  s += "property list " + count + " " + index + " " + index_name + line_end;
+  if (extras) s += "property int flags" + line_end + "property uchar red" + line_end + "property uchar green" +
+                   line_end + "property uchar blue" + line_end + "element edge 2" + line_end +
+                   "property list uchar ushort corners" + line_end + "property char weight" + line_end;
+  s += "end_header" + line_end;
+  const auto item_end = [&] {
+    if (format == PlyTestFormat::kAscii) s += line_end;
+  };
+  if (extras) {
+    putPly(s, format, "double", 35.5);
+    putPly(s, format, "ushort", 3);
+    for (double tag : {-1.0, 2.0, -128.0}) putPly(s, format, "char", tag);
+    item_end();
+  }
+  for (std::size_t v = 0; v < positions.size(); ++v) {
+    putPly(s, format, coordinate, positions[v].x());
+    if (extras) putPly(s, format, "short", -2.0 - static_cast<double>(v));
+    putPly(s, format, coordinate, positions[v].y());
+    putPly(s, format, coordinate, positions[v].z());
+    if (extras)
+      for (const auto& [type, value] : kVertexExtras) putPly(s, format, type, value);
+    item_end();
+  }
+  for (const auto& face : faces) {
+    if (extras) putPly(s, format, "uchar", 9);
+    putPly(s, format, count, static_cast<double>(face.size()));
+    for (std::int64_t corner : face) putPly(s, format, index, static_cast<double>(corner));
+    if (extras)
+      for (const auto& [type, value] : kFaceExtras) putPly(s, format, type, value);
+    item_end();
+  }
+  if (extras) {
+    for (int edge = 0; edge < 2; ++edge) {
+      putPly(s, format, "uchar", 2);
+      putPly(s, format, "ushort", 1);
+      putPly(s, format, "ushort", static_cast<double>(positions.size() - 1));
+      putPly(s, format, "char", -3);
+      item_end();
+    }
+  }
+  return s;
+}
+
+// Positions and faces for the typed PLY tests: a square, a quad on it, a triangle between the
+// coordinate type's extremes (vertices 4 and 5) and the last vertex, and a pentagon through the
+// last vertex; `count` vertices, so that 2-byte indices reach past 255.
+struct TypedMesh {
+  std::vector<Vec3> positions;
+  std::vector<std::vector<std::int64_t>> faces;
+  std::vector<Triangle> triangles;  // the fans, in face order
+};
+TypedMesh typedMesh(const std::string& coordinate, std::size_t count) {
+  const PlyTestType type = plyTestType(coordinate);
+  const int bits = 8 * type.bytes;
+  const double lo = !type.integer ? -1000.0 : type.is_signed ? -std::ldexp(1.0, bits - 1) : 0.0;
+  const double hi = !type.integer ? 1000.0 : type.is_signed ? std::ldexp(1.0, bits - 1) - 1 : std::ldexp(1.0, bits) - 1;
+  TypedMesh mesh;
+  mesh.positions = {{0, 0, 0}, {2, 0, 0}, {2, 2, 0}, {0, 2, 0}, {lo, hi, 0}, {hi, lo, 1}};
+  for (std::size_t k = 6; k + 1 < count; ++k)
+    mesh.positions.emplace_back(static_cast<double>(k % 50), static_cast<double>(k / 50), 5);
+  mesh.positions.emplace_back(3, 1, 0);
+  const auto last = static_cast<std::int64_t>(count - 1);
+  mesh.faces = {{0, 1, 2, 3}, {4, 5, last}, {0, 1, last, 2, 3}};
+  const auto l = static_cast<meshsweeper::VertexIndex>(last);
+  mesh.triangles = {{0, 1, 2}, {0, 2, 3}, {4, 5, l}, {0, 1, l}, {0, l, 2}, {0, 2, 3}};
+  return mesh;
+}
+
+const PlyTestFormat kPlyFormats[] = {PlyTestFormat::kAscii, PlyTestFormat::kLittleEndian, PlyTestFormat::kBigEndian};
+const char* plyFormatName(PlyTestFormat format) {
+  return format == PlyTestFormat::kAscii ? "ascii" : format == PlyTestFormat::kLittleEndian ? "binary LE" : "binary BE";
+}
 
 }  // namespace
 
@@ -546,6 +697,122 @@ TEST_CASE("binary PLY, little and big endian, float and double coordinates", "[m
   }
 }
 
+// CGAL 5.5 reads coordinates only as float or double and indices only as int or uint: other
+// integer types are re-encoded in memory for it (they were refused before).
+TEST_CASE("PLY: integer coordinates and every integer index type read as float and int", "[mesh_io]") {
+  TempDir dir;
+  const std::vector<std::string> coordinate_types = {"float", "char",  "uchar", "short",  "ushort", "int",   "uint",
+                                                     "int8",  "uint8", "int16", "uint16", "int32",  "uint32"};
+  const std::vector<std::string> index_types = {"int",  "uint",  "char",  "uchar",  "short",
+                                                "ushort", "int8", "uint8", "int16", "uint16"};
+  for (const PlyTestFormat format : kPlyFormats) {
+    for (const std::string& coordinate : coordinate_types) {
+      for (const std::string& index : index_types) {
+        for (const std::string count : {"uchar", "ushort"}) {
+          INFO(plyFormatName(format) << ", coordinates " << coordinate << ", indices list " << count << " " << index);
+          const PlyTestType type = plyTestType(coordinate);
+          const TypedMesh expected = typedMesh(coordinate, plyTestType(index).bytes == 1 ? 100 : 300);
+          // The same mesh as read before: float coordinates (double for 4-byte integers, which a
+          // float does not hold) and int indices.
+          const std::string reference_type = type.integer && type.bytes == 4 ? "double" : "float";
+          const Mesh reference = meshsweeper::readMesh(dir.write(
+              "reference.ply", typedPly(format, reference_type, "int", count, expected.positions, expected.faces)));
+          const std::string path =
+              dir.write("typed.ply", typedPly(format, coordinate, index, count, expected.positions, expected.faces));
+          CHECK(readError(path) == "(no error)");
+          if (readError(path) != "(no error)") continue;
+          const Mesh mesh = meshsweeper::readMesh(path);
+          CHECK(mesh.positions == expected.positions);
+          CHECK(mesh.positions == reference.positions);
+          CHECK(mesh.triangles == expected.triangles);
+          CHECK(mesh.triangles == reference.triangles);
+        }
+      }
+    }
+  }
+}
+
+TEST_CASE("PLY: re-encoded files with 'vertex_index', a byte order mark or CRLF header lines", "[mesh_io]") {
+  TempDir dir;
+  const TypedMesh expected = typedMesh("short", 300);
+  const std::string bom = "\xEF\xBB\xBF";
+  for (const PlyTestFormat format : kPlyFormats) {
+    for (const std::string index : {"int", "ushort", "char"}) {
+      INFO(plyFormatName(format) << ", indices " << index);
+      const TypedMesh& mesh = index == "char" ? typedMesh("short", 100) : expected;
+      // 'vertex_index', CGAL's other name for the list.
+      const Mesh named = meshsweeper::readMesh(dir.write(
+          "named.ply", typedPly(format, "short", index, "uchar", mesh.positions, mesh.faces, true, "vertex_index")));
+      CHECK(named.positions == mesh.positions);
+      CHECK(named.triangles == mesh.triangles);
+      // A byte order mark (dropped before the file is checked), CRLF header lines.
+      const Mesh marked = meshsweeper::readMesh(
+          dir.write("bom.ply", bom + typedPly(format, "short", index, "ushort", mesh.positions, mesh.faces)));
+      CHECK(marked.positions == mesh.positions);
+      CHECK(marked.triangles == mesh.triangles);
+      const std::string crlf_file =
+          typedPly(format, "int16", index, "uchar", mesh.positions, mesh.faces, true, "vertex_indices", "\r\n");
+      const Mesh crlf = meshsweeper::readMesh(dir.write("crlf.ply", crlf_file));
+      CHECK(crlf.positions == mesh.positions);
+      CHECK(crlf.triangles == mesh.triangles);
+    }
+  }
+}
+
+TEST_CASE("PLY: bad indices and values of the re-encoded types are refused by name", "[mesh_io]") {
+  TempDir dir;
+  const std::vector<Vec3> three = {kSquare[0], kSquare[1], kSquare[2]};
+  // readMesh's message for a file, which must name the file.
+  const auto error = [&](const std::string& name, const std::string& bytes) {
+    const std::string path = dir.write(name, bytes);
+    const std::string message = readError(path);
+    CHECK_THAT(message, StartsWith(path + ": "));
+    return message;
+  };
+  for (const PlyTestFormat format : kPlyFormats) {
+    INFO(plyFormatName(format));
+    for (const std::string index : {"uchar", "char", "ushort", "short", "uint8", "int16"}) {
+      INFO("indices " << index);
+      CHECK_THAT(error("range.ply", typedPly(format, "short", index, "uchar", three, {{0, 1, 2}, {0, 1, 3}})),
+                 Contains("face 1 uses vertex 3 but the file has 3 vertices"));
+      if (!plyTestType(index).is_signed) continue;
+      CHECK_THAT(error("negative.ply", typedPly(format, "float", index, "uchar", three, {{0, -1, 2}})),
+                 Contains("face 0 uses the negative vertex index -1"));
+      CHECK_THAT(error("negative2.ply", typedPly(format, "int", index, "ushort", three, {{0, 1, 2}, {2, 1, -2}})),
+                 Contains("face 1 uses the negative vertex index -2"));
+    }
+    if (format == PlyTestFormat::kAscii) {
+      // Each ASCII value is checked against its own type, not the one CGAL is given.
+      const std::pair<const char*, std::int64_t> values[] = {
+          {"uchar", 300}, {"uchar", -1}, {"char", 128}, {"ushort", 65536}};
+      for (const auto& [index, value] : values) {
+        INFO(index << " " << value);
+        CHECK_THAT(error("value.ply", typedPly(format, "float", index, "uchar", three, {{0, value, 2}})),
+                   Contains("PLY element 'face' item 0, 'vertex_indices': '" + std::to_string(value) +
+                            "' is out of range for its type"));
+      }
+      CHECK_THAT(error("char_x.ply", typedPly(format, "char", "int", "uchar", {{0, 0, 0}, {128, 0, 0}, {0, 1, 0}},
+                                              {{0, 1, 2}}, false)),
+                 Contains("PLY element 'vertex' item 1, 'x': '128' is out of range for its type"));
+      CHECK_THAT(error("int_y.ply", typedPly(format, "int", "int", "uchar", {{0, 0, 0}, {1, 0.5, 0}, {0, 1, 0}},
+                                             {{0, 1, 2}}, false)),
+                 Contains("PLY element 'vertex' item 1, 'y': '0.5' is not an integer"));
+      continue;
+    }
+    // Truncated binary files: inside an index list, before a face's count, inside the vertices.
+    const std::string whole = typedPly(format, "short", "ushort", "uchar", three, {{0, 1, 2}, {2, 1, 0}}, false);
+    for (const std::size_t cut : {1, 2, 5})
+      CHECK_THAT(error("cut.ply", whole.substr(0, whole.size() - cut)),
+                 Contains("PLY element 'face' item 1: list 'vertex_indices' declares 3 entries but the file "
+                          "ends first"));
+    CHECK_THAT(error("no_count.ply", whole.substr(0, whole.size() - 7)),
+               Contains("the file ends inside PLY element 'face' item 1 (truncated file)"));
+    const std::size_t body = whole.find("end_header\n") + 11;
+    CHECK_THAT(error("vertices.ply", whole.substr(0, body + 10)),
+               Contains("PLY element 'vertex' declares 3 items of at least 6 bytes, but only 10 bytes are left"));
+  }
+}
+
 TEST_CASE("ASCII STL: CGAL merges equal points, in order of first appearance", "[mesh_io]") {
   TempDir dir;
   const Mesh mesh = meshsweeper::readMesh(dir.write("square.stl",
@@ -756,10 +1023,18 @@ TEST_CASE("readMesh refuses PLY headers it cannot read safely", "[mesh_io]") {
   const std::string start = "ply\nformat ascii 1.0\nelement vertex 3\n";
   const std::string body = "0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n";
   const std::string faces = "element face 1\nproperty list uchar int vertex_indices\n";
-  // CGAL 5.5 dereferences a null pointer on integer coordinates.
-  CHECK_THAT(readError(dir.write("int.ply", start + "property int x\nproperty int y\nproperty int z\n" +
-                                                faces + "end_header\n" + body)),
-             Contains("only float or double"));
+  // Integer coordinates and 2-byte indices are read (CGAL 5.5 dereferenced a null pointer on
+  // the first and did not read the second: they were refused here; re-encoded for it now).
+  const std::vector<Vec3> three = {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}};
+  const std::vector<Triangle> one = {{0, 1, 2}};
+  const Mesh int_xyz = meshsweeper::readMesh(
+      dir.write("int.ply", start + "property int x\nproperty int y\nproperty int z\n" + faces + "end_header\n" + body));
+  CHECK(int_xyz.positions == three);
+  CHECK(int_xyz.triangles == one);
+  // A list is no coordinate, nor a list of floats a list of indices.
+  CHECK_THAT(readError(dir.write("list_x.ply", start + "property list uchar int x\nproperty int y\nproperty int z\n" +
+                                                   faces + "end_header\n1 0 0 0\n1 1 0 0\n1 0 1 0\n3 0 1 2\n")),
+             Contains("PLY element 'vertex': 'x' is a list, not a coordinate"));
   CHECK_THAT(readError(dir.write("noz.ply", start + "property float x\nproperty float y\n" + faces +
                                                 "end_header\n0 0\n1 0\n0 1\n3 0 1 2\n")),
              Contains("no 'z'"));
@@ -767,11 +1042,24 @@ TEST_CASE("readMesh refuses PLY headers it cannot read safely", "[mesh_io]") {
   CHECK_THAT(readError(dir.write("type.ply", start + xyz + "property uint64 id\n" + faces +
                                                  "end_header\n" + body)),
              Contains("unknown type 'uint64'"));
-  CHECK_THAT(readError(dir.write("short_index.ply",
-                                 start + xyz +
-                                     "element face 1\nproperty list uchar ushort vertex_indices\n"
+  const Mesh short_index = meshsweeper::readMesh(dir.write("short_index.ply",
+                                 start + xyz + "element face 1\nproperty list uchar ushort vertex_indices\n"
+                                     "end_header\n" + body));
+  CHECK(short_index.positions == three);
+  CHECK(short_index.triangles == one);
+  CHECK_THAT(readError(dir.write("float_index.ply",
+                                 start + xyz + "element face 1\nproperty list uchar float vertex_indices\n"
                                      "end_header\n" + body)),
-             Contains("vertex_indices"));
+             Contains("PLY element 'face' needs a 'vertex_indices' list of integers ('vertex_indices' is a list "
+                      "of float)"));
+  CHECK_THAT(readError(dir.write("scalar_index.ply",
+                                 start + xyz + "element face 1\nproperty uchar vertex_index\n"
+                                     "end_header\n0 0 0\n1 0 0\n0 1 0\n3\n")),
+             Contains("PLY element 'face' needs a 'vertex_indices' list of integers ('vertex_index' is uchar)"));
+  CHECK_THAT(readError(dir.write("no_index.ply",
+                                 start + xyz + "element face 1\nproperty list uchar int corners\n"
+                                     "end_header\n" + body)),
+             EndsWith("PLY element 'face' needs a 'vertex_indices' list of integers"));
   CHECK_THAT(readError(dir.write("noend.ply", start + xyz + faces)),
              Contains("the PLY header has no end_header (truncated file?)"));
   // Found by review: a header cut inside a line (no line break at its end) was said to have no
