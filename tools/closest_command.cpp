@@ -172,26 +172,31 @@ int runClosest(int argc, char** argv, int first) {
 
   // The hierarchy never has more triangles than the mesh: asking for more changes nothing.
   const size_t k_effective = static_cast<size_t>(std::min<uint64_t>(k, mesh.triangles.size()));
-  // Points are answered a chunk at a time, in blocks of kBlockPoints run in parallel (one query
-  // stream per thread; every answer is exact and ties go to the lowest triangle, so the rows do
-  // not depend on the threads), and the chunk's rows written in point order. A chunk holds
-  // about kBatchRows rows (--within or --k can give many rows per point: 200 points within 1e9
-  // of the armadillo are 10 million rows, which a review ran out of memory holding): its size
-  // follows the rows per point of the chunk before. query_seconds counts the queries only.
+  // Points are answered a chunk at a time, in blocks run in parallel (one query stream per
+  // thread; every answer is exact and ties go to the lowest triangle, so the rows do not depend
+  // on the threads), and the chunk's rows written in point order. Memory stays bounded whatever
+  // the rows per point (--within or --k can give many: 200 points within 1e9 of the armadillo
+  // are 10 million rows, which a review ran out of memory holding):
+  //  - a chunk is sized to hold about kBatchRows rows at the rows per point seen so far;
+  //  - once a chunk holds kRowCap rows, its blocks stop before their next point, and the rows
+  //    are written up to the first point not answered, where the next chunk starts (rows of
+  //    later points already answered are dropped and answered again).
+  // query_seconds counts the queries only.
   constexpr size_t kBatchRows = 1 << 16;
-  constexpr size_t kBlockPoints = 64;
+  constexpr size_t kRowCap = 2 * kBatchRows;
+  constexpr size_t kMaxBlock = 64;      // points
   constexpr size_t kMaxChunk = 16384;  // points
-  size_t total_rows = 0;
-  std::atomic<size_t> inside{0};
+  size_t total_rows = 0, inside = 0;
   double query_seconds = 0;
   out.write(signed_rows ? "point,rank,distance,lower,upper,triangle,x,y,z,b0,b1,b2,sign,signed_distance\n"
                         : "point,rank,distance,lower,upper,triangle,x,y,z,b0,b1,b2\n");
   // A block's rows as CSV text (made in parallel too: printing 17 digits costs about as much as
   // a query).
-  const auto formatRows = [&](const std::vector<Row>& rows, std::string& text) {
+  const auto formatRows = [&](const Row* rows, size_t count, std::string& text) {
     text.clear();
     char line[512];
-    for (const Row& r : rows) {
+    for (size_t k = 0; k < count; ++k) {
+      const Row& r = rows[k];
       int n = std::snprintf(line, sizeof line, "%u,%u,%.17g,%.17g,%.17g,%u,%.17g,%.17g,%.17g,%.17g,%.17g,%.17g",
                             r.point, r.rank, r.distance, r.lower, r.upper, r.triangle, r.position.x(),
                             r.position.y(), r.position.z(), r.barycentric.x(), r.barycentric.y(),
@@ -202,11 +207,16 @@ int runClosest(int argc, char** argv, int first) {
       text += '\n';
     }
   };
-  // Answers points [first, last) with `stream`, appending their rows to `rows`.
+  // The rows of the chunk so far (kRowCap stops it).
+  std::atomic<size_t> chunk_rows{0};
+  // Answers points [first, last) with `stream`, appending their rows to `rows`, until the chunk
+  // holds kRowCap rows (the chunk's first point is answered anyway, so every chunk moves on);
+  // returns how many points it answered.
   const auto answer = [&](QueryStream& stream, std::vector<TriangleHit>& hits, uint32_t first, uint32_t last,
-                          std::vector<Row>& rows) {
-    size_t block_inside = 0;
-    for (uint32_t i = first; i < last; ++i) {
+                          bool chunk_start, std::vector<Row>& rows) {
+    uint32_t i = first;
+    for (; i < last; ++i) {
+      if (!(chunk_start && i == first) && chunk_rows.load(std::memory_order_relaxed) >= kRowCap) break;
       const Vec3& p = points[i];
       const size_t point_rows = rows.size();  // the point's rows: rows[point_rows, end)
       switch (mode) {
@@ -235,10 +245,10 @@ int runClosest(int argc, char** argv, int first) {
         const Row& closest = rows[point_rows];
         const int side = restSide(*shape, p, closest.triangle, closest.feature, closest.position, closest.distance);
         for (size_t r = point_rows; r < rows.size(); ++r) rows[r].side = side;
-        block_inside += side < 0;
       }
+      chunk_rows.fetch_add(rows.size() - point_rows, std::memory_order_relaxed);
     }
-    inside += block_inside;
+    return i - first;
   };
 
   // --path: one stream follows the points in order, on this thread.
@@ -252,18 +262,32 @@ int runClosest(int argc, char** argv, int first) {
   };
   tbb::enumerable_thread_specific<Worker> workers([&] { return Worker{QueryStream(hierarchy), {}}; });
   std::vector<std::vector<Row>> block_rows;
-  std::vector<std::string> block_text;
-  size_t chunk = 4 * kBlockPoints;
+  std::vector<uint32_t> block_answered;  // [block] points answered
+  std::vector<size_t> block_written;     // [block] rows to write
+  // The rows written are formatted in pieces of at most kPieceRows, in parallel.
+  constexpr size_t kPieceRows = 4096;
+  struct Piece {
+    size_t block, begin, end;  // block_rows[block][begin, end)
+    std::string text;
+    size_t inside = 0;  // points inside (--signed): their first row is in the piece
+  };
+  std::vector<Piece> pieces;
+  // Rows per point are known but in within mode.
+  size_t chunk = mode == Mode::kWithin ? 4 * kMaxBlock : std::max<size_t>(1, kBatchRows / std::max<size_t>(1, k_effective));
+  if (mode == Mode::kClosest || mode == Mode::kAnytime) chunk = kMaxChunk;
   for (size_t first = 0; first < points.size();) {
+    chunk = std::min(chunk, kMaxChunk);
     const size_t last = std::min(points.size(), first + chunk);
-    const size_t blocks = (last - first + kBlockPoints - 1) / kBlockPoints;
+    const size_t block_points = std::clamp<size_t>(chunk / 16, 1, kMaxBlock);
+    const size_t blocks = (last - first + block_points - 1) / block_points;
     block_rows.assign(blocks, {});
-    block_text.resize(blocks);
+    block_answered.assign(blocks, 0);
+    chunk_rows = 0;
     const Timer query_timer;
     const auto block = [&](size_t b, QueryStream& stream, std::vector<TriangleHit>& hits) {
-      const size_t from = first + b * kBlockPoints;
-      answer(stream, hits, static_cast<uint32_t>(from), static_cast<uint32_t>(std::min(last, from + kBlockPoints)),
-             block_rows[b]);
+      const size_t from = first + b * block_points;
+      block_answered[b] = answer(stream, hits, static_cast<uint32_t>(from),
+                                 static_cast<uint32_t>(std::min(last, from + block_points)), b == 0, block_rows[b]);
     };
     if (path) {
       for (size_t b = 0; b < blocks; ++b) block(b, path_stream, path_hits);
@@ -276,27 +300,45 @@ int runClosest(int argc, char** argv, int first) {
       });
     }
     query_seconds += query_timer.seconds();
-    const auto format = [&](size_t b) {
-      formatRows(block_rows[b], block_text[b]);
-      std::vector<Row>().swap(block_rows[b]);
-    };
-    size_t chunk_rows = 0;
-    for (const std::vector<Row>& rows : block_rows) chunk_rows += rows.size();
-    if (path) {
-      for (size_t b = 0; b < blocks; ++b) format(b);
-    } else {
-      arena.execute([&] { tbb::parallel_for(size_t(0), blocks, format); });
+    // What is written: whole blocks up to the first that stopped, and that one's rows.
+    size_t written_blocks = 0, written_points = 0, written_rows = 0;
+    block_written.assign(blocks, 0);
+    for (size_t b = 0; b < blocks; ++b) {
+      block_written[b] = block_rows[b].size();
+      written_rows += block_rows[b].size();
+      written_points += block_answered[b];
+      ++written_blocks;
+      if (first + b * block_points + block_answered[b] < std::min(last, first + (b + 1) * block_points)) break;
     }
-    for (size_t b = 0; b < blocks; ++b) out.write(block_text[b]);
-    total_rows += chunk_rows;
-    chunk = chunk_rows == 0 ? kMaxChunk
-                            : std::clamp<size_t>((last - first) * kBatchRows / chunk_rows, kBlockPoints, kMaxChunk);
-    first = last;
+    pieces.clear();
+    for (size_t b = 0; b < written_blocks; ++b)
+      for (size_t begin = 0; begin < block_written[b]; begin += kPieceRows)
+        pieces.push_back({b, begin, std::min(block_written[b], begin + kPieceRows), {}, 0});
+    const auto format = [&](size_t k) {
+      Piece& piece = pieces[k];
+      const Row* rows = block_rows[piece.block].data();
+      formatRows(rows + piece.begin, piece.end - piece.begin, piece.text);
+      for (size_t r = piece.begin; r < piece.end; ++r) piece.inside += rows[r].rank == 0 && rows[r].side < 0;
+    };
+    if (path) {
+      for (size_t k = 0; k < pieces.size(); ++k) format(k);
+    } else {
+      arena.execute([&] { tbb::parallel_for(size_t(0), pieces.size(), format); });
+    }
+    for (Piece& piece : pieces) {
+      out.write(piece.text);
+      inside += piece.inside;
+      std::string().swap(piece.text);
+    }
+    total_rows += written_rows;
+    chunk = written_rows == 0 ? kMaxChunk
+                              : std::clamp<size_t>(written_points * kBatchRows / written_rows, 1, kMaxChunk);
+    first += written_points;
   }
   out.close();
 
   std::string coherence;
-  if (signed_rows) coherence = ", \"inside\": " + std::to_string(inside.load());
+  if (signed_rows) coherence = ", \"inside\": " + std::to_string(inside);
   if (path) {
     const CoherenceCounters& c = path_stream.coherence();
     coherence += ", \"certified\": " + std::to_string(c.certified) + ", \"rebuilds\": " +

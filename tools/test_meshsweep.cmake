@@ -378,6 +378,44 @@ if(DATA_DIR AND EXISTS "${DATA_DIR}/armadillo.off")
     --out real_path_k.csv ERR "\"rows\": 600")
   same_files(real.csv real_path.csv)
   same_files(real_k.csv real_path_k.csv)
+  # Many rows per point: within 1000 of the armadillo is every one of its 52,000 triangles.
+  # After three such points a chunk holds 2^17 rows and stops; the next starts at the fourth.
+  # The same rows as --k 52000 (ties by triangle). With 120 points that reach a part of the
+  # mesh after them (about 1,000 rows each), another thread answers some of those while the
+  # first is busy: their rows are dropped and answered again, and 1 and 2 threads give the
+  # same file. With 40 far points (no row) first, the stop comes in the chunk's last block.
+  file(STRINGS "${WORK_DIR}/real_points.txt" real_lines REGEX "^[^#]")
+  list(SUBLIST real_lines 0 4 real_lines)
+  list(JOIN real_lines "\n" near_four)
+  file(WRITE "${WORK_DIR}/near_four.txt" "${near_four}\n")
+  set(far_first "")
+  foreach(f RANGE 39)
+    string(APPEND far_first "1e7 ${f} 0\n")
+  endforeach()
+  file(WRITE "${WORK_DIR}/far_first.txt" "${far_first}${near_four}\n")
+  check(real_within_all RC 0 ARGS closest "${DATA_DIR}/armadillo.off" near_four.txt --within 1000
+    --threads 2 --out real_within_all.csv ERR "\"rows\": 208000")
+  check(real_k_all RC 0 ARGS closest "${DATA_DIR}/armadillo.off" near_four.txt --k 52000
+    --out real_k_all.csv ERR "\"rows\": 208000")
+  same_files(real_within_all.csv real_k_all.csv)
+  set(reach_after "")
+  foreach(f RANGE 119)
+    math(EXPR x "1050 + ${f}")
+    string(APPEND reach_after "${x} ${f} 0\n")
+  endforeach()
+  file(WRITE "${WORK_DIR}/reach_after.txt" "${near_four}\n${reach_after}")
+  foreach(threads 1 2)
+    check(real_far_first_${threads} RC 0 ARGS closest "${DATA_DIR}/armadillo.off" far_first.txt --within 1000
+      --threads ${threads} --out real_far_first_${threads}.csv ERR "\"rows\": 208000")
+    check(real_reach_after_${threads} RC 0 ARGS closest "${DATA_DIR}/armadillo.off" reach_after.txt --within 1000
+      --threads ${threads} --out real_reach_after_${threads}.csv)
+  endforeach()
+  same_files(real_far_first_1.csv real_far_first_2.csv)
+  same_files(real_reach_after_1.csv real_reach_after_2.csv)
+  file(READ "${WORK_DIR}/real_far_first_2.csv" far_rows LIMIT 200)
+  expect(real_far_first_rows "far_rows MATCHES \"\\n40,0,\"" "far_first's rows start at point 40")
+  file(REMOVE "${WORK_DIR}/real_within_all.csv" "${WORK_DIR}/real_k_all.csv" "${WORK_DIR}/real_far_first_1.csv"
+    "${WORK_DIR}/real_far_first_2.csv" "${WORK_DIR}/real_reach_after_1.csv" "${WORK_DIR}/real_reach_after_2.csv")
   # The scene's certified bounds and percentages are rounded outward (rounded to nearest, the
   # lower percentage printed as 0.8451%, above the proven value).
   check(scene_hausdorff RC 0 ARGS scene hausdorff --out scene_hausdorff
