@@ -263,7 +263,6 @@ int runClosest(int argc, char** argv, int first) {
   tbb::enumerable_thread_specific<Worker> workers([&] { return Worker{QueryStream(hierarchy), {}}; });
   std::vector<std::vector<Row>> block_rows;
   std::vector<uint32_t> block_answered;  // [block] points answered
-  std::vector<size_t> block_written;     // [block] rows to write
   // The rows written are formatted in pieces of at most kPieceRows, in parallel.
   constexpr size_t kPieceRows = 4096;
   struct Piece {
@@ -302,9 +301,7 @@ int runClosest(int argc, char** argv, int first) {
     query_seconds += query_timer.seconds();
     // What is written: whole blocks up to the first that stopped, and that one's rows.
     size_t written_blocks = 0, written_points = 0, written_rows = 0;
-    block_written.assign(blocks, 0);
     for (size_t b = 0; b < blocks; ++b) {
-      block_written[b] = block_rows[b].size();
       written_rows += block_rows[b].size();
       written_points += block_answered[b];
       ++written_blocks;
@@ -312,8 +309,8 @@ int runClosest(int argc, char** argv, int first) {
     }
     pieces.clear();
     for (size_t b = 0; b < written_blocks; ++b)
-      for (size_t begin = 0; begin < block_written[b]; begin += kPieceRows)
-        pieces.push_back({b, begin, std::min(block_written[b], begin + kPieceRows), {}, 0});
+      for (size_t begin = 0; begin < block_rows[b].size(); begin += kPieceRows)
+        pieces.push_back({b, begin, std::min(block_rows[b].size(), begin + kPieceRows), {}, 0});
     const auto format = [&](size_t k) {
       Piece& piece = pieces[k];
       const Row* rows = block_rows[piece.block].data();
