@@ -1,5 +1,6 @@
 // meshsweep info: what the hierarchy of a mesh looks like and what it costs (build phases,
 // tree shape, memory of the fixed tables and of one query stream).
+#include "collision/body.h"
 #include "core/mesh_io.h"
 #include "core/sweep_query.h"
 #include "scenes/procedural.h"
@@ -17,7 +18,8 @@ const char kInfoHelp[] =
     "rounds, base triangles, 8-wide nodes, leaf blocks, depth), the fixed tables' memory\n"
     "(bytes, bytes per triangle) and the changing state of one query stream after N exact\n"
     "queries near the surface (default 1000): its bytes, and the mean nodes and triangles a\n"
-    "query visited.\n"
+    "query visited. Then whether the mesh is closed, so that its distances can be signed\n"
+    "(closest --signed): \"closed\": true, or false and \"open_reason\" (the first problem).\n"
     "\n"
     "Exit status: 0 success, 1 unreadable/invalid mesh, 2 bad command line.\n";
 
@@ -36,6 +38,7 @@ int runInfo(int argc, char** argv, int first) {
     nodes += c.counters.nodes_visited;
     triangles += c.counters.triangles_tested;
   }
+  const std::shared_ptr<const BodyShape> shape = BodyShape::build(h);
   const double per = queries > 0 ? 1.0 / static_cast<double>(queries) : 0.0;
   std::printf(
       "{\"mesh\": %s, \"vertices\": %zu, \"triangles\": %zu,\n"
@@ -44,12 +47,14 @@ int runInfo(int argc, char** argv, int first) {
       " \"leaf_blocks\": %u, \"depth\": %u},\n"
       " \"fixed_bytes\": %zu, \"fixed_bytes_per_triangle\": %.1f,\n"
       " \"stream_state_bytes\": %zu, \"queries\": %llu, \"nodes_per_query\": %.2f,"
-      " \"triangles_per_query\": %.2f}\n",
+      " \"triangles_per_query\": %.2f,\n"
+      " \"closed\": %s%s}\n",
       jsonString(path).c_str(), mesh.positions.size(), mesh.triangles.size(), s.contract_seconds,
       s.tree_seconds, s.bounds_seconds, s.total_seconds, s.rounds, s.contractions, s.base_triangles,
       h->nodes().size(), h->leafCount(), s.depth, s.fixed_bytes,
       static_cast<double>(s.fixed_bytes) / static_cast<double>(mesh.triangles.size()), stream.stateBytes(),
-      static_cast<unsigned long long>(queries), nodes * per, triangles * per);
+      static_cast<unsigned long long>(queries), nodes * per, triangles * per, shape->closed() ? "true" : "false",
+      shape->closed() ? "" : (", \"open_reason\": " + jsonString(shape->openReason())).c_str());
   return kExitOk;
 }
 

@@ -192,6 +192,9 @@ check(signed_within RC 0 ARGS closest octahedron.off sides.txt --signed --within
 check(unsigned_columns RC 0 ARGS closest octahedron.off sides.txt OUT "${header}" NOT_OUT "sign" NOT_ERR "inside")
 check(signed_open RC 1 ARGS closest quad.off points.txt --signed
   ERR "meshsweep: quad.off: distances cannot be signed: the mesh is not closed (edge (0, 1) has 1 face (boundary))")
+check(info_closed RC 0 ARGS info octahedron.off --queries 5 OUT "\"closed\": true}" NOT_OUT "open_reason")
+check(info_open RC 0 ARGS info quad.off --queries 5
+  OUT "\"closed\": false, \"open_reason\": \"edge (0, 1) has 1 face (boundary)\"}")
 check(signed_tolerance RC 2 ARGS closest octahedron.off sides.txt --signed --tolerance 0.1
   ERR "--signed needs exact closest points")
 
