@@ -12,6 +12,16 @@
 namespace meshsweeper {
 namespace {
 
+constexpr double kPi = 3.14159265358979323846;
+
+// The solid angle of triangle (a, b, c) seen from p, signed by its orientation (van Oosterom and
+// Strackee): summed over a closed surface, 4 pi times its winding number about p.
+double solidAngle(const Vec3& a, const Vec3& b, const Vec3& c, const Vec3& p) {
+  const Vec3 u = a - p, v = b - p, w = c - p;
+  const double lu = u.norm(), lv = v.norm(), lw = w.norm();
+  return 2 * std::atan2(u.dot(v.cross(w)), lu * lv * lw + u.dot(v) * lw + v.dot(w) * lu + w.dot(u) * lv);
+}
+
 // The angle of triangle (a, b, c) at corner a, robust for short edges (atan2, not acos).
 double cornerAngle(const Vec3& a, const Vec3& b, const Vec3& c) {
   const Vec3 u = b - a, v = c - a;
@@ -151,7 +161,6 @@ std::string nestingProblem(const Mesh& mesh, const std::vector<uint32_t>& compon
     std::vector<uint32_t> fill(begin.begin(), begin.end() - 1);
     for (size_t f = 0; f < face_count; ++f) faces[fill[component[f]]++] = static_cast<TriangleIndex>(f);
   }
-  constexpr double kPi = 3.14159265358979323846;
   uint64_t solid_angles = 0;
   for (size_t c = 0; c < count; ++c) {
     const double own = volume6[c] * orientation;
@@ -170,9 +179,7 @@ std::string nestingProblem(const Mesh& mesh, const std::vector<uint32_t>& compon
                  std::to_string(kMaxSolidAngles) + " solid angles)";
         for (uint32_t i = begin[d]; i < begin[d + 1]; ++i) {
           const Triangle& t = mesh.triangles[faces[i]];
-          const Vec3 a = x[t[0]] - p, b = x[t[1]] - p, e = x[t[2]] - p;
-          const double la = a.norm(), lb = b.norm(), le = e.norm();
-          winding += 2 * std::atan2(a.dot(b.cross(e)), la * lb * le + a.dot(b) * le + b.dot(e) * la + e.dot(a) * lb);
+          winding += solidAngle(x[t[0]], x[t[1]], x[t[2]], p);
         }
       }
       winding *= orientation / (4 * kPi);
@@ -450,7 +457,10 @@ Vec3 BodyShape::pseudonormalAsGiven(TriangleIndex triangle, Feature feature, con
 int restSide(const BodyShape& shape, const Vec3& p, TriangleIndex triangle, Feature feature, const Vec3& closest,
              double distance) {
   if (!shape.closed()) return 0;
-  const double touch = 16 * std::numeric_limits<double>::epsilon() * p.cwiseAbs().maxCoeff();
+  const Triangle& t = shape.mesh().triangles[triangle];
+  double scale = p.cwiseAbs().maxCoeff();
+  for (int k = 0; k < 3; ++k) scale = std::max(scale, shape.mesh().positions[t[k]].cwiseAbs().maxCoeff());
+  const double touch = 16 * std::numeric_limits<double>::epsilon() * scale;
   const Vec3 offset = p - closest;
   if (!(distance > touch) || !(offset.squaredNorm() > 0)) return 1;  // on the surface
   double outside2 = 0;  // squared distance from p to the rest box
@@ -461,6 +471,27 @@ int restSide(const BodyShape& shape, const Vec3& p, TriangleIndex triangle, Feat
   }
   if (outside2 > touch * touch) return 1;
   return offset.dot(shape.restPseudonormal(triangle, feature)) < 0 ? -1 : 1;
+}
+
+int checkedRestSide(const BodyShape& shape, QueryStream& stream, const Vec3& p, const ClosestPoint& c) {
+  const int side = restSide(shape, p, c);
+  if (side == 0 || c.triangle == kInvalidIndex) return side;
+  // The rounding of a computed distance: a few eps times the coordinates of p and of the mesh.
+  const double scale = std::max({p.cwiseAbs().maxCoeff(), shape.restLower().cwiseAbs().maxCoeff(),
+                                 shape.restUpper().cwiseAbs().maxCoeff()});
+  const double rounding = 64 * std::numeric_limits<double>::epsilon() * scale;
+  std::vector<TriangleHit> hits;
+  stream.within(p, c.distance + rounding, hits);
+  bool agree = true;
+  for (const TriangleHit& h : hits) agree = agree && restSide(shape, p, h) == side;
+  if (agree) return side;
+  // The generalised winding number: about +-1 inside (its sign follows the faces' orientation),
+  // 0 outside, also in a cavity.
+  const Mesh& mesh = shape.mesh();
+  double total = 0;
+  for (const Triangle& t : mesh.triangles)
+    total += solidAngle(mesh.positions[t[0]], mesh.positions[t[1]], mesh.positions[t[2]], p);
+  return std::abs(total) > 2 * kPi ? -1 : 1;  // |winding number| > 1/2
 }
 
 size_t BodyShape::bytes() const {

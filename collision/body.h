@@ -141,9 +141,10 @@ class BodyShape {
 // (QueryStream::closest()'s answer, or the first hit of kClosest() or within()). Returns -1
 // inside, +1 outside, 0 when the shape is not closed() (no sign). The rule of the service's
 // hits (DistanceHit::sign): the closest feature's pseudonormal (any closest point gives the same
-// side on a closed surface); a point within 16 eps times its largest coordinate of the surface
-// is on it, and outside, and so is a point outside the rest box by more than that (far away,
-// the distances of opposite faces tie in doubles).
+// side on a closed surface). A point within 16 eps times the coordinates involved (its own and
+// the triangle's) of the surface is on it, and outside: its distance is made of rounding. So
+// is a point outside the rest box by more than that (far away, the distances of opposite faces
+// tie in doubles).
 int restSide(const BodyShape& shape, const Vec3& p, TriangleIndex triangle, Feature feature, const Vec3& closest,
              double distance);
 // The same from an exact answer (not an anytime one with a tolerance: its point is not the
@@ -154,6 +155,12 @@ inline int restSide(const BodyShape& shape, const Vec3& p, const ClosestPoint& c
 inline int restSide(const BodyShape& shape, const Vec3& p, const TriangleHit& first) {
   return restSide(shape, p, first.triangle, first.feature, first.point, first.distance);
 }
+// restSide() checked against the faces whose distance to p lies within rounding of the closest
+// one (`stream` lists them: any stream of shape.hierarchy(), not one following a path): where
+// their sides disagree, the closest face was picked by rounding (beside a needle thinner than
+// the rounding of the coordinates, say) and the generalised winding number decides, O(faces).
+// Costs a within() query more than restSide(). What `meshsweep closest --signed` prints.
+int checkedRestSide(const BodyShape& shape, QueryStream& stream, const Vec3& p, const ClosestPoint& c);
 
 // The unit normal of triangle (a, b, c) (right-hand rule), zero when its area is zero.
 Vec3 unitFaceNormal(const Vec3& a, const Vec3& b, const Vec3& c);

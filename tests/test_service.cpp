@@ -685,7 +685,7 @@ TEST_CASE("restSide signs a static mesh's closest points like the winding number
       points.insert(points.end(), {a, 0.5 * (a + b), (a + b + d) / 3});
     }
     const StepResult result = service.step(toMatrix(points), kInf, QueryMode::kClosest);
-    QueryStream stream(hierarchy);
+    QueryStream stream(hierarchy), check_stream(hierarchy);
     std::vector<TriangleHit> hits;
     Failures failures("restSide on " + c.name);
     size_t inside = 0, outside = 0;
@@ -701,6 +701,8 @@ TEST_CASE("restSide signs a static mesh's closest points like the winding number
       stream.within(p, closest.distance * (1 + 1e-9) + 1e-300, hits);
       failures.check(!hits.empty() && restSide(*shape, p, hits[0]) == side,
                      [&] { return where() + ": within's first hit gives another side"; });
+      failures.check(checkedRestSide(*shape, check_stream, p, closest) == side,
+                     [&] { return where() + ": checkedRestSide gives another side"; });
       const DistanceHit* hit = result.closest(i);
       REQUIRE(hit != nullptr);
       if (i >= far_end) {  // on the surface: outside
@@ -736,6 +738,79 @@ TEST_CASE("restSide signs a static mesh's closest points like the winding number
     const ClosestPoint c = stream.closest(p);
     CHECK(restSide(*open_shape, p, c) == 0);
   }
+}
+
+// Found by review: beside a needle thinner than the rounding of its coordinates (a cone of
+// radius 1e-6 and height 1 at (1000, 1000, 1000)), every side face near the apex lies at the
+// same computed distance from a point 1e-8 away, and the closest one was picked by rounding: on
+// the far side, its pseudonormal said inside. checkedRestSide finds faces of both sides within
+// rounding of the distance and asks the winding number. And a point within the rounding of a
+// face whose corners are far (a tetrahedron of size 1e5 whose face passes 1e-12 from it) is on
+// the surface, outside, though it is nearer than the rounding of its own coordinates.
+TEST_CASE("checkedRestSide: the winding number decides beside a needle thinner than the rounding", "[service][sign]") {
+  const double r = 1e-6;
+  const Vec3 at(1000, 1000, 1000);
+  Mesh cone;
+  cone.positions = {at + Vec3(0, 0, 1), at};
+  constexpr int kSides = 16;
+  for (int i = 0; i < kSides; ++i) {
+    const double angle = 2 * kPi * i / kSides;
+    cone.positions.push_back(at + Vec3(r * std::cos(angle), r * std::sin(angle), 0));
+  }
+  for (VertexIndex i = 0; i < kSides; ++i) {
+    const VertexIndex a = 2 + i, b = 2 + (i + 1) % kSides;
+    cone.triangles.push_back({0, a, b});
+    cone.triangles.push_back({1, b, a});
+  }
+  const auto hierarchy = Hierarchy::build(cone);
+  const auto shape = BodyShape::build(hierarchy);
+  REQUIRE(shape->closed());
+  REQUIRE_FALSE(shape->inward());
+  QueryStream stream(hierarchy), check_stream(hierarchy);
+  Random random(31);
+  size_t plain_wrong = 0, points = 0;
+  Failures failures("needle");
+  // Beside the needle below its apex: lateral offset s (1e-9 to 1e-6), height below the apex up
+  // to 10 s, where the cone's radius is at most 1e-5 s: every point is outside, at about s.
+  for (double s = 1e-9; s <= 1e-6; s *= 10) {
+    for (int k = 0; k < 200; ++k, ++points) {
+      const double angle = 2 * kPi * random.uniform(), h = 10 * s * random.uniform();
+      const Vec3 p = at + Vec3(s * std::cos(angle), s * std::sin(angle), 1 - h);
+      const ClosestPoint c = stream.closest(p);
+      plain_wrong += restSide(*shape, p, c) != 1;
+      failures.check(checkedRestSide(*shape, check_stream, p, c) == 1, [&] {
+        return "point " + text(p) + " (s " + std::to_string(s) + "), distance " + std::to_string(c.distance);
+      });
+    }
+  }
+  INFO(plain_wrong << " of " << points << " wrong without the check");
+  CHECK(plain_wrong > 0);  // the case the check is for (a test of the test)
+  // Inside the needle's base (radius 1e-6 about the axis, heights where it is thick): inside.
+  for (int k = 0; k < 200; ++k) {
+    const double angle = 2 * kPi * random.uniform(), h = 0.01 + 0.5 * random.uniform();
+    const Vec3 p = at + Vec3(0.2 * r * std::cos(angle), 0.2 * r * std::sin(angle), h);
+    failures.check(checkedRestSide(*shape, check_stream, p, stream.closest(p)) == -1,
+                   [&] { return "point " + text(p) + " inside the needle"; });
+  }
+
+  // A point 1e-12 inside a face whose corners lie 1e5 away: on the surface (outside).
+  Mesh big;
+  big.positions = {Vec3(-1e5, -1e5, 0), Vec3(1e5, -1e5, 0), Vec3(0, 1e5, 0), Vec3(0, 0, 3e5)};
+  big.triangles = {{0, 2, 1}, {0, 1, 3}, {1, 2, 3}, {2, 0, 3}};
+  const auto big_hierarchy = Hierarchy::build(big);
+  const auto big_shape = BodyShape::build(big_hierarchy);
+  REQUIRE(big_shape->closed());
+  QueryStream big_stream(big_hierarchy);
+  for (const double z : {1e-12, 3e-11, 1e-10}) {
+    const Vec3 p(1e-4, 2e-4, z);  // inside, z above the base face
+    const ClosestPoint c = big_stream.closest(p);
+    INFO("z " << z << ", distance " << c.distance);
+    CHECK(c.distance < 1e-9);
+    CHECK(restSide(*big_shape, p, c) == 1);
+    CHECK(checkedRestSide(*big_shape, big_stream, p, c) == 1);
+  }
+  const Vec3 deeper(1e-4, 2e-4, 1e-6);  // beyond the rounding: inside
+  CHECK(restSide(*big_shape, deeper, big_stream.closest(deeper)) == -1);
 }
 
 // Meshes that are closed by their connectivity but cannot give a reliable sign are open:

@@ -42,8 +42,9 @@ const char kClosestHelp[] =
     "                  --within; one thread (--threads 1, if given)\n"
     "  --signed        add the columns sign,signed_distance: -1 inside, 1 outside a closed\n"
     "                  mesh (from the angle-weighted pseudonormal at the closest point's\n"
-    "                  vertex, edge or face; a point on the surface, up to 16 eps times its\n"
-    "                  coordinates, is outside). Every row of a point has the point's sign.\n"
+    "                  vertex, edge or face, or the winding number where faces of both sides\n"
+    "                  tie within rounding; a point on the surface, up to 16 eps times the\n"
+    "                  coordinates involved, is outside). Every row of a point has its sign.\n"
     "                  The mesh must be closed (each edge in two faces, oriented alike,\n"
     "                  manifold vertices, no degenerate face, no self-intersection,\n"
     "                  enclosing a volume), else exit status 1 with the reason. Not with\n"
@@ -68,8 +69,8 @@ const char kClosestHelp[] =
     "   \"build_seconds\": ..., \"query_seconds\": ..., \"mode\": ..., \"path\": ...,\n"
     "   \"threads\": ...}  (query_seconds: wall-clock time of the queries)\n"
     "  with --path also \"certified\", \"rebuilds\", \"searched\", \"front_resets\" (coherence counters)\n"
-    "  with --signed also \"inside\" (points inside); build_seconds then includes the\n"
-    "  closedness check and pseudonormals\n"
+    "  with --signed also \"inside\" (points inside, of those with rows); build_seconds then\n"
+    "  includes the closedness check and pseudonormals\n"
     "\n"
     "Exit status: 0 success, 1 unreadable/invalid input file or unwritable output,\n"
     "2 bad command line.\n";
@@ -107,6 +108,17 @@ Row rowFromHit(uint32_t point, uint32_t rank, const TriangleHit& hit) {
 
 Row rowFromClosest(uint32_t point, const ClosestPoint& c) {
   return {point, 0, c.distance, c.lower, c.upper, c.triangle, c.point, c.barycentric, c.feature};
+}
+
+// The exact answer a row holds (its point's closest, for its first row).
+ClosestPoint closestAnswer(const Row& r) {
+  ClosestPoint c;
+  c.distance = c.lower = c.upper = r.distance;
+  c.point = r.position;
+  c.triangle = r.triangle;
+  c.barycentric = r.barycentric;
+  c.feature = r.feature;
+  return c;
 }
 
 }  // namespace
@@ -159,15 +171,17 @@ int runClosest(int argc, char** argv, int first) {
     throw UsageError("closest: too many points (" + std::to_string(points.size()) + ")");
   Output out(args.has("--out") ? args.value("--out") : std::string("-"));
 
+  // The build runs on the queries' threads too.
+  tbb::task_arena arena(arenaConcurrency(path ? 1 : threads));
   const Timer build_timer;
-  const std::shared_ptr<const Hierarchy> hierarchy = Hierarchy::build(mesh);
+  std::shared_ptr<const Hierarchy> hierarchy;
   std::shared_ptr<const BodyShape> shape;
-  if (signed_rows) {
-    shape = BodyShape::build(hierarchy);
-    if (!shape->closed())
-      throw MeshError(mesh_path + ": distances cannot be signed: the mesh is not closed (" +
-                      shape->openReason() + ")");
-  }
+  arena.execute([&] {
+    hierarchy = Hierarchy::build(mesh);
+    if (signed_rows) shape = BodyShape::build(hierarchy);
+  });
+  if (shape && !shape->closed())
+    throw MeshError(mesh_path + ": distances cannot be signed: the mesh is not closed (" + shape->openReason() + ")");
   const double build_seconds = build_timer.seconds();
 
   // The hierarchy never has more triangles than the mesh: asking for more changes nothing.
@@ -212,8 +226,9 @@ int runClosest(int argc, char** argv, int first) {
   // Answers points [first, last) with `stream`, appending their rows to `rows`, until the chunk
   // holds kRowCap rows (the chunk's first point is answered anyway, so every chunk moves on);
   // returns how many points it answered.
-  const auto answer = [&](QueryStream& stream, std::vector<TriangleHit>& hits, uint32_t first, uint32_t last,
-                          bool chunk_start, std::vector<Row>& rows) {
+  // `sign_stream` checks the sides (checkedRestSide: it must not disturb a path's stream).
+  const auto answer = [&](QueryStream& stream, QueryStream& sign_stream, std::vector<TriangleHit>& hits,
+                          uint32_t first, uint32_t last, bool chunk_start, std::vector<Row>& rows) {
     uint32_t i = first;
     for (; i < last; ++i) {
       if (!(chunk_start && i == first) && chunk_rows.load(std::memory_order_relaxed) >= kRowCap) break;
@@ -243,7 +258,7 @@ int runClosest(int argc, char** argv, int first) {
       // The point's first row is its closest point (within and k rows come by distance).
       if (signed_rows && rows.size() > point_rows && rows[point_rows].triangle != kInvalidIndex) {
         const Row& closest = rows[point_rows];
-        const int side = restSide(*shape, p, closest.triangle, closest.feature, closest.position, closest.distance);
+        const int side = checkedRestSide(*shape, sign_stream, p, closestAnswer(closest));
         for (size_t r = point_rows; r < rows.size(); ++r) rows[r].side = side;
       }
       chunk_rows.fetch_add(rows.size() - point_rows, std::memory_order_relaxed);
@@ -252,15 +267,15 @@ int runClosest(int argc, char** argv, int first) {
   };
 
   // --path: one stream follows the points in order, on this thread.
-  QueryStream path_stream(hierarchy);
+  QueryStream path_stream(hierarchy), path_sign_stream(hierarchy);
   std::vector<TriangleHit> path_hits;
-  tbb::task_arena arena(arenaConcurrency(path ? 1 : threads));
   const int thread_count = path ? 1 : arena.max_concurrency();
   struct Worker {
-    QueryStream stream;
+    QueryStream stream, sign_stream;
     std::vector<TriangleHit> hits;
   };
-  tbb::enumerable_thread_specific<Worker> workers([&] { return Worker{QueryStream(hierarchy), {}}; });
+  tbb::enumerable_thread_specific<Worker> workers(
+      [&] { return Worker{QueryStream(hierarchy), QueryStream(hierarchy), {}}; });
   std::vector<std::vector<Row>> block_rows;
   std::vector<uint32_t> block_answered;  // [block] points answered
   // The rows written are formatted in pieces of at most kPieceRows, in parallel.
@@ -283,18 +298,18 @@ int runClosest(int argc, char** argv, int first) {
     block_answered.assign(blocks, 0);
     chunk_rows = 0;
     const Timer query_timer;
-    const auto block = [&](size_t b, QueryStream& stream, std::vector<TriangleHit>& hits) {
+    const auto block = [&](size_t b, QueryStream& stream, QueryStream& sign_stream, std::vector<TriangleHit>& hits) {
       const size_t from = first + b * block_points;
-      block_answered[b] = answer(stream, hits, static_cast<uint32_t>(from),
+      block_answered[b] = answer(stream, sign_stream, hits, static_cast<uint32_t>(from),
                                  static_cast<uint32_t>(std::min(last, from + block_points)), b == 0, block_rows[b]);
     };
     if (path) {
-      for (size_t b = 0; b < blocks; ++b) block(b, path_stream, path_hits);
+      for (size_t b = 0; b < blocks; ++b) block(b, path_stream, path_sign_stream, path_hits);
     } else {
       arena.execute([&] {
         tbb::parallel_for(size_t(0), blocks, [&](size_t b) {
           Worker& w = workers.local();
-          block(b, w.stream, w.hits);
+          block(b, w.stream, w.sign_stream, w.hits);
         });
       });
     }
