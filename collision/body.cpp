@@ -2,6 +2,7 @@
 // (Baerentzen & Aanaes 2005; see body.h).
 #include "collision/body.h"
 
+#include "collision/broadphase.h"
 #include "collision/self_intersection.h"
 
 #include <algorithm>
@@ -463,24 +464,18 @@ int restSide(const BodyShape& shape, const Vec3& p, TriangleIndex triangle, Feat
   const double touch = 16 * std::numeric_limits<double>::epsilon() * scale;
   const Vec3 offset = p - closest;
   if (!(distance > touch) || !(offset.squaredNorm() > 0)) return 1;  // on the surface
-  double outside2 = 0;  // squared distance from p to the rest box
-  for (int axis = 0; axis < 3; ++axis) {
-    const double gap =
-        std::max({shape.restLower()[axis] - p[axis], p[axis] - shape.restUpper()[axis], 0.0});
-    outside2 += gap * gap;
-  }
-  if (outside2 > touch * touch) return 1;
+  if (squaredBoxDistance(Box3{shape.restLower(), shape.restUpper()}, p) > touch * touch) return 1;
   return offset.dot(shape.restPseudonormal(triangle, feature)) < 0 ? -1 : 1;
 }
 
-int checkedRestSide(const BodyShape& shape, QueryStream& stream, const Vec3& p, const ClosestPoint& c) {
+int checkedRestSide(const BodyShape& shape, QueryStream& stream, const Vec3& p, const ClosestPoint& c,
+                    std::vector<TriangleHit>& hits) {
   const int side = restSide(shape, p, c);
   if (side == 0 || c.triangle == kInvalidIndex) return side;
   // The rounding of a computed distance: a few eps times the coordinates of p and of the mesh.
   const double scale = std::max({p.cwiseAbs().maxCoeff(), shape.restLower().cwiseAbs().maxCoeff(),
                                  shape.restUpper().cwiseAbs().maxCoeff()});
   const double rounding = 64 * std::numeric_limits<double>::epsilon() * scale;
-  std::vector<TriangleHit> hits;
   stream.within(p, c.distance + rounding, hits);
   bool agree = true;
   for (const TriangleHit& h : hits) agree = agree && restSide(shape, p, h) == side;

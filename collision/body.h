@@ -159,8 +159,10 @@ inline int restSide(const BodyShape& shape, const Vec3& p, const TriangleHit& fi
 // one (`stream` lists them: any stream of shape.hierarchy(), not one following a path): where
 // their sides disagree, the closest face was picked by rounding (beside a needle thinner than
 // the rounding of the coordinates, say) and the generalised winding number decides, O(faces).
-// Costs a within() query more than restSide(). What `meshsweep closest --signed` prints.
-int checkedRestSide(const BodyShape& shape, QueryStream& stream, const Vec3& p, const ClosestPoint& c);
+// Costs a within() query more than restSide(), listed into `hits` (scratch, reused from call
+// to call). What `meshsweep closest --signed` prints.
+int checkedRestSide(const BodyShape& shape, QueryStream& stream, const Vec3& p, const ClosestPoint& c,
+                    std::vector<TriangleHit>& hits);
 
 // The unit normal of triangle (a, b, c) (right-hand rule), zero when its area is zero.
 Vec3 unitFaceNormal(const Vec3& a, const Vec3& b, const Vec3& c);

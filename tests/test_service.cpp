@@ -701,7 +701,7 @@ TEST_CASE("restSide signs a static mesh's closest points like the winding number
       stream.within(p, closest.distance * (1 + 1e-9) + 1e-300, hits);
       failures.check(!hits.empty() && restSide(*shape, p, hits[0]) == side,
                      [&] { return where() + ": within's first hit gives another side"; });
-      failures.check(checkedRestSide(*shape, check_stream, p, closest) == side,
+      failures.check(checkedRestSide(*shape, check_stream, p, closest, hits) == side,
                      [&] { return where() + ": checkedRestSide gives another side"; });
       const DistanceHit* hit = result.closest(i);
       REQUIRE(hit != nullptr);
@@ -767,6 +767,7 @@ TEST_CASE("checkedRestSide: the winding number decides beside a needle thinner t
   REQUIRE(shape->closed());
   REQUIRE_FALSE(shape->inward());
   QueryStream stream(hierarchy), check_stream(hierarchy);
+  std::vector<TriangleHit> hits;
   Random random(31);
   size_t plain_wrong = 0, points = 0;
   Failures failures("needle");
@@ -778,7 +779,7 @@ TEST_CASE("checkedRestSide: the winding number decides beside a needle thinner t
       const Vec3 p = at + Vec3(s * std::cos(angle), s * std::sin(angle), 1 - h);
       const ClosestPoint c = stream.closest(p);
       plain_wrong += restSide(*shape, p, c) != 1;
-      failures.check(checkedRestSide(*shape, check_stream, p, c) == 1, [&] {
+      failures.check(checkedRestSide(*shape, check_stream, p, c, hits) == 1, [&] {
         return "point " + text(p) + " (s " + std::to_string(s) + "), distance " + std::to_string(c.distance);
       });
     }
@@ -789,7 +790,7 @@ TEST_CASE("checkedRestSide: the winding number decides beside a needle thinner t
   for (int k = 0; k < 200; ++k) {
     const double angle = 2 * kPi * random.uniform(), h = 0.01 + 0.5 * random.uniform();
     const Vec3 p = at + Vec3(0.2 * r * std::cos(angle), 0.2 * r * std::sin(angle), h);
-    failures.check(checkedRestSide(*shape, check_stream, p, stream.closest(p)) == -1,
+    failures.check(checkedRestSide(*shape, check_stream, p, stream.closest(p), hits) == -1,
                    [&] { return "point " + text(p) + " inside the needle"; });
   }
 
@@ -807,7 +808,7 @@ TEST_CASE("checkedRestSide: the winding number decides beside a needle thinner t
     INFO("z " << z << ", distance " << c.distance);
     CHECK(c.distance < 1e-9);
     CHECK(restSide(*big_shape, p, c) == 1);
-    CHECK(checkedRestSide(*big_shape, big_stream, p, c) == 1);
+    CHECK(checkedRestSide(*big_shape, big_stream, p, c, hits) == 1);
   }
   const Vec3 deeper(1e-4, 2e-4, 1e-6);  // beyond the rounding: inside
   CHECK(restSide(*big_shape, deeper, big_stream.closest(deeper)) == -1);

@@ -258,7 +258,7 @@ int runClosest(int argc, char** argv, int first) {
       // The point's first row is its closest point (within and k rows come by distance).
       if (signed_rows && rows.size() > point_rows && rows[point_rows].triangle != kInvalidIndex) {
         const Row& closest = rows[point_rows];
-        const int side = checkedRestSide(*shape, sign_stream, p, closestAnswer(closest));
+        const int side = checkedRestSide(*shape, sign_stream, p, closestAnswer(closest), hits);
         for (size_t r = point_rows; r < rows.size(); ++r) rows[r].side = side;
       }
       chunk_rows.fetch_add(rows.size() - point_rows, std::memory_order_relaxed);
