@@ -693,7 +693,8 @@ struct DistanceService::Impl {
 
   // The hit of a query point q (in the body's frame) on `face` of body `slot`: closest point
   // c (body frame), feature, barycentric coordinates, distance; `touch` is surfaceRounding()
-  // at q (a hit no farther is on the surface).
+  // at q (a hit no farther is on the surface), widened here by the face's corners for the
+  // hit's direction and sign.
   // `signed_hit` false: the caller sets the sign (signLikeClosest), so the pseudonormal is only
   // needed for the direction on the surface.
   DistanceHit makeHit(uint32_t slot, const Vec3& p, const Vec3& q, TriangleIndex face, Feature feature, const Vec3& c,
@@ -710,7 +711,13 @@ struct DistanceService::Impl {
     const Vec3 offset = q - c;
     const double length = offset.norm();
     // On the surface (up to rounding) the offset's direction is noise: the pseudonormal gives
-    // the direction, and the point is outside.
+    // the direction, and the point is outside. The rounding of c also counts the face's
+    // corners (restSide's band): near a large face that passes close to the frame's origin, q's
+    // coordinates are small but c carries those of the corners (found by review: a point 4e-12
+    // inside a face whose corners lie 1e5 away was signed by the noise of its closest point).
+    const Triangle& corners = shape.mesh().triangles[face];
+    const Vec3* x = b.positions();
+    for (int k = 0; k < 3; ++k) touch = std::max(touch, kSurfaceRounding * x[corners[k]].cwiseAbs().maxCoeff());
     const bool on_surface = !(distance > touch) || !(length > 0);
     // The pseudonormal gives a closed body's sign, and the direction on the surface; an open
     // moving body skips it otherwise (evaluated at the current positions, it is not free).

@@ -812,6 +812,29 @@ TEST_CASE("checkedRestSide: the winding number decides beside a needle thinner t
   }
   const Vec3 deeper(1e-4, 2e-4, 1e-6);  // beyond the rounding: inside
   CHECK(restSide(*big_shape, deeper, big_stream.closest(deeper)) == -1);
+
+  // The service's hits count the corners too (rigid, deforming, key-framed): the same sides.
+  const std::vector<Vec3> band = {Vec3(1e-4, 2e-4, 1e-12), Vec3(1e-4, 2e-4, 3e-11), Vec3(1e-4, 2e-4, 1e-10),
+                                  Vec3(-3e-4, 1e-4, 5e-12), deeper};
+  for (int kind = 0; kind < 3; ++kind) {
+    DistanceService service;
+    const auto h = service.hierarchyFor(big);
+    if (kind == 0) service.addRigid(h);
+    else if (kind == 1) service.addDeforming(h, 0.0);
+    else service.addKeyframed(h, {big.positions}, 0.0);
+    for (const QueryMode mode : {QueryMode::kClosest, QueryMode::kWithin}) {
+      const StepResult result = service.step(toMatrix(band), 1e-5, mode);
+      for (size_t i = 0; i < band.size(); ++i) {
+        INFO("kind " << kind << ", mode " << int(mode) << ", point " << text(band[i]));
+        REQUIRE_FALSE(result.hits(i).empty());
+        const DistanceHit& hit = result.hits(i)[0];
+        CHECK(hit.sign == (i + 1 == band.size() ? HitSign::kInside : HitSign::kOutside));
+        CHECK(hit.sign == (restSide(*big_shape, band[i], big_stream.closest(band[i])) < 0 ? HitSign::kInside
+                                                                                             : HitSign::kOutside));
+        if (i + 1 < band.size()) CHECK(hit.direction.isApprox(Vec3(0, 0, -1), 1e-12));  // the base's normal
+      }
+    }
+  }
 }
 
 // Meshes that are closed by their connectivity but cannot give a reliable sign are open:
