@@ -1076,6 +1076,23 @@ TEST_CASE("open meshes answer unsigned; distance 0 uses the feature's pseudonorm
   CHECK(m.closest(1)->distance == 0);
   CHECK(m.closest(1)->sign == HitSign::kUnsigned);
   CHECK(m.closest(1)->direction.isApprox(Vec3(0, 0, 1), 1e-12));
+
+  // Two faces in one plane oriented against each other (their shared edge used the same way
+  // round): on that edge their normals cancel, and the direction is zero, not noise (an audit's
+  // case). Off the edge, on either face, it is that face's normal.
+  Mesh folded;
+  folded.positions = {Vec3(-1, 1, -1), Vec3(-1, -1, 1), Vec3(-1, -1, -1), Vec3(-1, 1, 1)};
+  folded.triangles = {{0, 1, 2}, {0, 1, 3}};
+  DistanceService flat;
+  flat.addRigid(flat.hierarchyFor(folded));
+  const std::vector<Vec3> on = {Vec3(-1, 0, 0), Vec3(-1, -0.5, -0.8), Vec3(-1, 0.5, 0.8)};
+  const StepResult f = flat.step(toMatrix(on), 0.0, QueryMode::kClosest);
+  for (size_t i = 0; i < on.size(); ++i) REQUIRE(f.closest(i));
+  CHECK(f.closest(0)->distance == 0);
+  CHECK(f.closest(0)->feature == Feature::kEdge01);
+  CHECK(f.closest(0)->direction == Vec3::Zero());
+  CHECK(f.closest(1)->direction.isApprox(Vec3(1, 0, 0), 1e-12));
+  CHECK(f.closest(2)->direction.isApprox(Vec3(-1, 0, 0), 1e-12));
 }
 
 // Found by review: the orientation of a closed mesh was decided once, at its rest positions,
