@@ -413,76 +413,93 @@ std::string checkOffBody(std::istream& in, const OffHeader& header) {
   while (static_cast<std::uint64_t>(in.tellg()) < header.body_offset && std::getline(in, line))
     ++line_number;
   bool vertex_colours = false, face_colours = false;  // COFF: a vertex (face) before had a colour
+  // The first vertex line with more numbers than a vertex takes (no colours declared): CGAL
+  // ignores them, but where the file then fails, vertices written several to a line (a
+  // free-format OFF) are the likely cause, and the message says so (found by an audit: such
+  // a file was said to end after its first face).
+  std::uint64_t crowded_line = 0, crowded_numbers = 0, crowded_needed = 0;
+  auto hinted = [&](std::string problem) {
+    if (crowded_line != 0)
+      problem += " (line " + std::to_string(crowded_line) + " holds " + std::to_string(crowded_numbers) +
+                 " numbers where a vertex of " + header.keyword + " takes " + std::to_string(crowded_needed) +
+                 ": OFF is read one vertex, and one face, a line)";
+    return problem;
+  };
   for (std::uint64_t v = 0; v < header.vertices; ++v) {
     if (!nextDataLine(in, line, line_number))
-      return "the file ends after " + plural(v, "vertex") + " of the " +
-             std::to_string(header.vertices) + " declared";
+      return hinted("the file ends after " + plural(v, "vertex") + " of the " +
+                    std::to_string(header.vertices) + " declared");
     const auto words = splitWords(line);
     std::size_t numbers = 0;
     for (std::string_view w : words) {
       double value;
       if (parseDouble(w, value) != NumberStatus::kOk) {
         if (numbers >= 3) break;  // CGAL stops at the first word that is not a number
-        return "line " + std::to_string(line_number) + ": vertex " + std::to_string(v) + ": " +
-               shown(w) + " is not a finite number";
+        return hinted("line " + std::to_string(line_number) + ": vertex " + std::to_string(v) + ": " +
+                      shown(w) + " is not a finite number");
       }
       ++numbers;
     }
     if (numbers < 3)
-      return "line " + std::to_string(line_number) + ": vertex " + std::to_string(v) +
-             " has fewer than 3 coordinates";
+      return hinted("line " + std::to_string(line_number) + ": vertex " + std::to_string(v) +
+                    " has fewer than 3 coordinates");
     // The keyword's other numbers, as CGAL's scanner takes them (it indexes past the line's
     // numbers when they are missing, and a colour-map index outside an int crashes it).
     const std::size_t h = header.homogeneous ? 1 : 0;
     const std::size_t needed = 3 + h + (header.normals ? 3 + h : 0) + (header.textures ? 2 + h : 0);
     if (numbers < needed)
-      return "line " + std::to_string(line_number) + ": vertex " + std::to_string(v) + " has " +
-             plural(numbers, "number") + ", but a vertex of " + header.keyword + " needs " + std::to_string(needed) +
-             " (" + std::to_string(3 + h) + " coordinates" + (header.normals ? ", a normal" : "") +
-             (header.textures ? ", texture coordinates" : "") + ")";
+      return hinted("line " + std::to_string(line_number) + ": vertex " + std::to_string(v) + " has " +
+                    plural(numbers, "number") + ", but a vertex of " + header.keyword + " needs " + std::to_string(needed) +
+                    " (" + std::to_string(3 + h) + " coordinates" + (header.normals ? ", a normal" : "") +
+                    (header.textures ? ", texture coordinates" : "") + ")");
+    if (!header.colors && numbers > needed && crowded_line == 0) {
+      crowded_line = line_number;
+      crowded_numbers = numbers;
+      crowded_needed = needed;
+    }
     if (header.homogeneous) {  // CGAL divides the coordinates by the fourth number
       double x[4];
       for (std::size_t k = 0; k < 4; ++k) parseDouble(words[k], x[k]);
       if (x[3] == 0 || !std::isfinite(x[0] / x[3]) || !std::isfinite(x[1] / x[3]) || !std::isfinite(x[2] / x[3]))
-        return "line " + std::to_string(line_number) + ": vertex " + std::to_string(v) + ": its coordinates divided by its weight " +
-               shown(words[3]) + " (the fourth number of a " + header.keyword + " vertex) are not finite";
+        return hinted("line " + std::to_string(line_number) + ": vertex " + std::to_string(v) + ": its coordinates divided by its weight " +
+                      shown(words[3]) + " (the fourth number of a " + header.keyword + " vertex) are not finite");
     }
     if (header.colors) {
       const std::string problem =
           checkOffColor(words, 3 + h + (header.normals ? 3 + h : 0), numbers - needed, "vertex", vertex_colours);
       if (!problem.empty())
-        return "line " + std::to_string(line_number) + ": vertex " + std::to_string(v) + ": " + problem;
+        return hinted("line " + std::to_string(line_number) + ": vertex " + std::to_string(v) + ": " + problem);
     }
   }
   for (std::uint64_t f = 0; f < header.faces; ++f) {
     if (!nextDataLine(in, line, line_number))
-      return "the file ends after " + plural(f, "face") + " of the " +
-             std::to_string(header.faces) + " declared";
+      return hinted("the file ends after " + plural(f, "face") + " of the " +
+                    std::to_string(header.faces) + " declared");
     const auto words = splitWords(line);
     const std::string where = "line " + std::to_string(line_number) + ": face " +
                               std::to_string(f);
     std::int64_t corners = 0;
     if (!parseInteger(words[0], corners) || corners < 0) {
       if (isHugeInteger(words[0]) && words[0][0] != '-')
-        return where + ": corner count " + shown(words[0]) + " is out of range";
-      return where + ": " + shown(words[0]) + " is not a corner count";
+        return hinted(where + ": corner count " + shown(words[0]) + " is out of range");
+      return hinted(where + ": " + shown(words[0]) + " is not a corner count");
     }
     if (static_cast<std::uint64_t>(corners) + 1 > words.size())
-      return where + " declares " + std::to_string(corners) + " corners but lists " +
-             plural(words.size() - 1, "index");
+      return hinted(where + " declares " + std::to_string(corners) + " corners but lists " +
+                    plural(words.size() - 1, "index"));
     for (std::int64_t k = 1; k <= corners; ++k) {
       std::int64_t index = 0;
       if (!parseInteger(words[k], index)) {
         if (isHugeInteger(words[k]))
-          return where + " uses vertex " + shown(words[k]) + " but the file has " + plural(header.vertices, "vertex");
+          return hinted(where + " uses vertex " + shown(words[k]) + " but the file has " + plural(header.vertices, "vertex"));
         double value;
         if (parseDouble(words[k], value) == NumberStatus::kOk)
-          return where + ": index " + shown(words[k]) + " is not an integer";
-        return where + ": index " + shown(words[k]) + " is not a number";
+          return hinted(where + ": index " + shown(words[k]) + " is not an integer");
+        return hinted(where + ": index " + shown(words[k]) + " is not a number");
       }
       if (index < 0 || static_cast<std::uint64_t>(index) >= header.vertices)
-        return where + " uses vertex " + std::string(words[k]) + " but the file has " +
-               plural(header.vertices, "vertex");
+        return hinted(where + " uses vertex " + std::string(words[k]) + " but the file has " +
+                      plural(header.vertices, "vertex"));
     }
     if (header.colors) {
       const std::size_t first = static_cast<std::size_t>(corners) + 1;
@@ -490,7 +507,7 @@ std::string checkOffBody(std::istream& in, const OffHeader& header) {
       double value;
       while (end < words.size() && parseDouble(words[end], value) == NumberStatus::kOk) ++end;
       const std::string problem = checkOffColor(words, first, end - first, "face", face_colours);
-      if (!problem.empty()) return where + ": " + problem;
+      if (!problem.empty()) return hinted(where + ": " + problem);
     }
   }
   if (nextDataLine(in, line, line_number)) {
@@ -499,8 +516,8 @@ std::string checkOffBody(std::istream& in, const OffHeader& header) {
     const bool end_of_file_byte = line.find_first_not_of(" \t\r\v\f\x1a") == std::string::npos &&
                                   std::count(line.begin(), line.end(), '\x1a') == 1;
     if (!end_of_file_byte || nextDataLine(in, line, line_number))
-      return "line " + std::to_string(end_of_file_byte ? line_number : extra_line) + ": more data after the " +
-             plural(header.faces, "face") + " the header declares (a wrong face count?)";
+      return hinted("line " + std::to_string(end_of_file_byte ? line_number : extra_line) + ": more data after the " +
+                    plural(header.faces, "face") + " the header declares (a wrong face count?)");
   }
   return {};
 }
@@ -514,6 +531,17 @@ std::string checkOffBody(std::istream& in, const OffHeader& header) {
 // far, and allows an index one past the last vertex. Here every corner must be 'v', 'v/t',
 // 'v//n' or 'v/t/n' with integers, v in 1..(vertices in the file) or -1..-(vertices so far).
 // Returns the first problem ("line L: ..."), or an empty string.
+// The statements CGAL's read_OBJ knows (it fails on any other).
+bool knownObjStatement(std::string_view word) {
+  static const char* const kKnown[] = {
+      "v", "vt", "vn", "f", "l", "vp", "bevel", "lod", "ctech", "c_interp", "usemap", "usemtl",
+      "stech", "d_interp", "mtllib", "shadow_obj", "trace_obj", "o", "g", "s", "p", "cstype",
+      "deg", "step", "bmat", "con", "curv", "curv2", "surf", "parm", "trim", "hole", "scrv", "sp",
+      "end", "surf_1", "q0_1", "q1_1", "curv2d_1", "surf_2", "q0_2", "q1_2", "curv2d_2", "bsp",
+      "bzp", "cdc", "cdp", "res"};
+  return std::find(std::begin(kKnown), std::end(kKnown), word) != std::end(kKnown);
+}
+
 std::string checkObjFaces(const std::string& text) {
   std::uint64_t vertices = 0;
   for (int pass = 1; pass <= 2; ++pass) {
@@ -529,6 +557,11 @@ std::string checkObjFaces(const std::string& text) {
         return "line " + std::to_string(line_number) +
                ": a CR inside the line (lines that end in CR alone among LF ones): convert them to LF or CRLF";
       const auto words = splitWords(line);
+      // A statement CGAL does not know is reported at its line, before any face that needs the
+      // vertices after it (found by an audit: 'V 0 0 0' on line 1 was named as a face's index
+      // out of range on line 4).
+      if (pass == 1 && !knownObjStatement(words[0]))
+        return "line " + std::to_string(line_number) + ": unsupported OBJ statement " + shown(words[0]);
       if (words[0] == "v") {
         // CGAL reads coordinates with operator>>, which stops inside a word ('1-5' is 1 and
         // -5, '3abc' is 3): each of the first three must be a number, whole.
@@ -735,12 +768,6 @@ void triangulatePolygon(const std::vector<Vec3>& x, std::vector<VertexIndex>& ri
 // reads (one statement per line; statements it does not know make it fail). Returns an empty
 // string when nothing is found.
 std::string diagnoseObj(std::istream& in) {
-  static const char* const kKnown[] = {
-      "v", "vt", "vn", "f", "l", "vp", "bevel", "lod", "ctech", "c_interp", "usemap", "usemtl",
-      "stech", "d_interp", "mtllib", "shadow_obj", "trace_obj", "o", "g", "s", "p", "cstype",
-      "deg", "step", "bmat", "con", "curv", "curv2", "surf", "parm", "trim", "hole", "scrv", "sp",
-      "end", "surf_1", "q0_1", "q1_1", "curv2d_1", "surf_2", "q0_2", "q1_2", "curv2d_2", "bsp",
-      "bzp", "cdc", "cdp", "res"};
   std::string line;
   std::uint64_t vertices = 0, faces = 0;
   // Pass 1: statements and vertices; pass 2: face indices against the vertex count.
@@ -769,8 +796,7 @@ std::string diagnoseObj(std::istream& in) {
         ++face;
         continue;
       }
-      if (std::find(std::begin(kKnown), std::end(kKnown), words[0]) == std::end(kKnown))
-        return at + "unsupported OBJ statement " + shown(words[0]);
+      if (!knownObjStatement(words[0])) return at + "unsupported OBJ statement " + shown(words[0]);
       if (words[0] == "f") ++faces;
       if (words[0] != "v") continue;
       ++vertices;
@@ -930,8 +956,23 @@ PlyHeader parsePlyHeader(const std::string& path, std::istream& in) {
 
   // What CGAL's read_PLY interprets, and the types it assumes for it.
   bool has_vertices = false, has_faces = false;
+  const PlyElement* vertex_element = nullptr;
+  const PlyElement* face_element = nullptr;
   for (const PlyElement& element : header.elements) {
     const std::string what = "PLY element '" + element.name + "'";
+    // Two vertex (or face) elements are read one after the other by CGAL, and a face list under
+    // both names by one of them: which is meant is not said, so neither is guessed (found by an
+    // audit).
+    const PlyElement*& first = isVertexElement(element.name) ? vertex_element : face_element;
+    if (isVertexElement(element.name) || isFaceElement(element.name)) {
+      if (first != nullptr)
+        fail(path, what + " follows element '" + first->name + "': a PLY file with two " +
+                       (isVertexElement(element.name) ? "vertex" : "face") + " elements is ambiguous");
+      first = &element;
+    }
+    if (isFaceElement(element.name) && element.find("vertex_indices") != nullptr &&
+        element.find("vertex_index") != nullptr)
+      fail(path, what + " has both 'vertex_indices' and 'vertex_index' lists: which holds the corners is ambiguous");
     if (element.properties.empty() && element.count > 0) fail(path, what + " has no properties");
     if (isVertexElement(element.name) || isFaceElement(element.name)) {
       // CGAL reads colours when each of red/r, green/g and blue/b is a uchar, then the three of
@@ -1725,7 +1766,9 @@ Mesh readMeshFrom(const std::string& path) {
     // anywhere on a line, as for the checks here (CGAL would read 'f 1 2#x 3' as 1 2 3).
     statements([&](size_t first, size_t end) {
       if (keyword(first, end, 'l')) text[first] = '#';
-      const size_t hash = text.find('#', first);
+      // Searched within the line only (found by an audit: text.find ran to the file's end on
+      // every line of a file without '#', 22 s for 12 MB).
+      const size_t hash = static_cast<size_t>(std::find(text.begin() + first, text.begin() + end, '#') - text.begin());
       if (hash < end && hash != first)
         for (size_t i = hash; i < end; ++i)
           if (text[i] != '\r') text[i] = ' ';

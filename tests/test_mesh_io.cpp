@@ -1292,6 +1292,14 @@ TEST_CASE("readMesh refuses indices that are not integers, and data past the dec
   CHECK_THAT(readError(dir.write("more.off", "OFF\n4 1 0\n0 0 0\n1 0 0\n0 1 0\n5 5 5\n3 0 1 2\n3 1 2 3\n")),
              Contains("line 8: more data after the 1 face the header declares"));
   CHECK_THAT(readError(dir.write("tail.off", head + "3 0 1 2\nend\n")), Contains("line 7: more data after"));
+  // Found by an audit: vertices written several to a line (free-format OFF) made the file "end
+  // after 1 face": the message now points at the line that holds more than a vertex. A fourth
+  // number alone is read as before (CGAL ignores it).
+  CHECK_THAT(readError(dir.write("crowded.off", "OFF\n4 2 0\n0 0 0 1 0 0\n1 1 0\n0 1 0\n3 0 1 2\n3 0 2 3\n")),
+             Contains("the file ends after 1 face of the 2 declared (line 3 holds 6 numbers where a vertex of OFF "
+                      "takes 3: OFF is read one vertex, and one face, a line)"));
+  CHECK(meshsweeper::readMesh(dir.write("fourth.off", "OFF\n3 1 0\n0 0 0 9\n1 0 0\n0 1 0\n3 0 1 2\n")).positions ==
+        std::vector<Vec3>{{0, 0, 0}, {1, 0, 0}, {0, 1, 0}});
   // Comments and blank lines after the faces are fine; so are per-face colours.
   CHECK(meshsweeper::readMesh(dir.write("ok.off", head + "3 0 1 2 255 0 0 # red\n\n# end\n")).triangles.size() == 1);
   // So is a DOS end-of-file byte (0x1A) as the last word of a text file, in every text format;
@@ -1341,6 +1349,12 @@ TEST_CASE("readMesh refuses out-of-range indices and faces with fewer than 3 cor
              Contains("line 4: face 0 uses OBJ index 4 but the file has 3 vertices"));
   CHECK_THAT(readError(dir.write("range2.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\nf 1 2 9\n")),
              Contains("line 5: face 1 uses OBJ index 9 but the file has 3 vertices"));
+  // Found by an audit: a statement CGAL does not know ('V', uppercase) is the problem, named at
+  // its line, not the face that then lacks a vertex.
+  CHECK_THAT(readError(dir.write("upper.obj", "V 0 0 0\nv 1 0 0\nv 1 1 0\nf 1 2 3\n")),
+             Contains("upper.obj: line 1: unsupported OBJ statement 'V'"));
+  CHECK_THAT(readError(dir.write("later.obj", "v 0 0 0\nv 1 0 0\nv 1 1 0\nf 1 2 3\nvx 1\nf 1 2 4\n")),
+             Contains("later.obj: line 5: unsupported OBJ statement 'vx'"));
   // Indices past 64 bits are out of range, not malformed: the message says which index.
   const std::string huge(300, '9');
   CHECK_THAT(readError(dir.write("huge_v.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 -" + huge + " 3\n")),
@@ -1438,6 +1452,23 @@ TEST_CASE("ASCII PLY: repeated properties refused, long values read whole", "[me
       "property float z\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n"
       "9 0 0 0\n9 1 0 0\n9 0 1 0\n3 0 1 2\n");
   CHECK_THAT(readError(twice), Contains("PLY header line 5: property 'x' declared twice in element 'vertex'"));
+  // Found by an audit: a face list under both names was read from one, and two vertex (face)
+  // elements one after the other; which is meant is not said, so both are refused by name.
+  const std::string xyz = "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n";
+  CHECK_THAT(readError(dir.write("both_lists.ply", xyz +
+                                 "element face 1\nproperty list uchar int vertex_indices\n"
+                                 "property list uchar int vertex_index\nend_header\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2 3 0 2 1\n")),
+             Contains("both_lists.ply") && Contains("has both 'vertex_indices' and 'vertex_index' lists"));
+  CHECK_THAT(readError(dir.write("two_vertex.ply", xyz +
+                                 "element vertex 1\nproperty float x\nproperty float y\nproperty float z\n"
+                                 "element face 1\nproperty list uchar int vertex_indices\nend_header\n"
+                                 "0 0 0\n1 0 0\n0 1 0\n5 5 5\n3 0 1 3\n")),
+             Contains("two_vertex.ply") && Contains("two vertex elements is ambiguous"));
+  CHECK_THAT(readError(dir.write("two_face.ply", xyz +
+                                 "element face 1\nproperty list uchar int vertex_indices\n"
+                                 "element faces 1\nproperty list uchar int vertex_indices\nend_header\n"
+                                 "0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n3 0 2 1\n")),
+             Contains("PLY element 'faces' follows element 'face'") && Contains("two face elements is ambiguous"));
   const Mesh mesh = meshsweeper::readMesh(dir.write("long.ply",
       "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
       "element face 1\nproperty list uchar int vertex_indices\nend_header\n"
