@@ -176,6 +176,20 @@ struct MeanSums {
   double area = 0, sum = 0, sum2 = 0;
 };
 
+// A vector's bytes (its capacity), and at most while `extra` more elements go in: it grows to
+// max(2 size, size + extra) (libstdc++; other libraries grow by less), its old and new buffers
+// both held while the elements move.
+template <class T>
+uint64_t capacityBytes(const std::vector<T>& v) {
+  return v.capacity() * sizeof(T);
+}
+template <class T>
+uint64_t grownBytes(const std::vector<T>& v, size_t extra) {
+  const size_t needed = v.size() + extra;
+  if (needed <= v.capacity()) return capacityBytes(v);
+  return (v.capacity() + std::max(2 * v.size(), needed)) * sizeof(T);
+}
+
 // Edge (two sample ids) -> midpoint sample id; open addressing, linear probing.
 class EdgeMap {
  public:
@@ -197,6 +211,15 @@ class EdgeMap {
     ++size_;
     inserted = true;
     return fresh;
+  }
+
+  // Its bytes now, and at most while `inserts` more go in (old and new tables while it grows).
+  uint64_t bytes() const { return keys_.capacity() * sizeof(uint64_t) + values_.capacity() * sizeof(uint32_t); }
+  uint64_t bytesAfter(size_t inserts) const {
+    size_t slots = keys_.size();
+    while (2 * (size_ + inserts) > slots) slots = std::max<size_t>(1024, 2 * slots);
+    const uint64_t per_slot = sizeof(uint64_t) + sizeof(uint32_t);
+    return slots == keys_.size() ? bytes() : bytes() + slots * per_slot;
   }
 
  private:
@@ -715,6 +738,23 @@ class Direction {
     for (uint32_t f = 0; f < nt; ++f) pushOrDrop(f, threshold);
   }
 
+  // The refinement's tables (HausdorffOptions::max_bytes): their bytes now, and at most during
+  // the next refine(), which adds up to 4 cells, 3 samples, 3 edges and 3 net heap entries per
+  // cell of its batch.
+  uint64_t bytes() const {
+    return capacityBytes(cells_) + capacityBytes(samples_) + capacityBytes(heap_) + edges_.bytes() +
+           capacityBytes(batch_) + capacityBytes(mids_) + capacityBytes(new_ids_) + capacityBytes(child_first_) +
+           capacityBytes(thin_) + capacityBytes(order_);
+  }
+  uint64_t bytesAfterRound() const {
+    const size_t batch = std::min(heap_.size(), std::clamp(heap_.size() / kBatchDivisor, kMinBatch, kMaxBatch));
+    return bytes() + (grownBytes(cells_, 4 * batch) - capacityBytes(cells_)) +
+           (grownBytes(samples_, 3 * batch) - capacityBytes(samples_)) +
+           (grownBytes(heap_, 3 * batch) - capacityBytes(heap_)) + (edges_.bytesAfter(3 * batch) - edges_.bytes()) +
+           (grownBytes(mids_, 3 * batch) - capacityBytes(mids_)) + (grownBytes(order_, 3 * batch) - capacityBytes(order_)) +
+           (grownBytes(new_ids_, 3 * batch) - capacityBytes(new_ids_));
+  }
+
   double lower() const { return lb_; }
   double topUpper() const { return heap_.empty() ? -kInf : heap_.front().upper; }
   double upper() const { return std::max({lb_, topUpper(), dropped_upper_}); }
@@ -1161,12 +1201,21 @@ HausdorffResult run(const Mesh& a, const std::shared_ptr<const Hierarchy>& a_hie
           ba && excess_ba > 0 &&
           (!(excess_ab > 0) ||
            (options.tighten_both ? excess_ba > excess_ab : ba->topUpper() > ab.topUpper()));
+      if (options.max_bytes > 0) {
+        const Direction& picked = pick_ba ? *ba : ab;
+        const uint64_t after = ab.bytes() + (ba ? ba->bytes() : 0) + (picked.bytesAfterRound() - picked.bytes());
+        if (after > options.max_bytes) {
+          result.memory_limited = true;  // not within the tolerance yet
+          break;
+        }
+      }
       if (pick_ba)
         ba->refine(floor_ba, tol);
       else
         ab.refine(floor_ab, tol);
       report();
     }
+    result.table_bytes = ab.bytes() + (ba ? ba->bytes() : 0);
     ab.finish(result.a_to_b);
     addCounters(result.counters, result.a_to_b.counters);
     result.converged = ab.converged();
@@ -1183,7 +1232,7 @@ HausdorffResult run(const Mesh& a, const std::shared_ptr<const Hierarchy>& a_hie
       result.upper = result.a_to_b.upper;
     }
   });
-  result.converged = result.converged && !result.timed_out && result.upper - result.lower <= tol;
+  result.converged = result.converged && !result.timed_out && !result.memory_limited && result.upper - result.lower <= tol;
   result.seconds = secondsSince(start);
   return result;
 }

@@ -43,7 +43,7 @@
 //  - surfaces that coincide but are triangulated differently are split along the other's edges
 //    down to the tolerance (a point there is covered by no single face of B): cells, time and
 //    memory grow as 1 / tolerance (cube-meshed against cube: 5 s at 1e-5, 44 s and 2.3 GB at
-//    1e-6, measured by review).
+//    1e-6, measured by review); HausdorffOptions::max_seconds and max_bytes bound them.
 #include "core/hierarchy.h"
 
 #include <functional>
@@ -78,6 +78,16 @@ struct HausdorffOptions {
   // on the machine's speed. Surfaces that coincide but are triangulated differently are the
   // case that needs it (see Limits).
   double max_seconds = 0;
+  // When > 0: refinement stops before a round could take its tables past about this many bytes,
+  // with the certified interval reached so far (HausdorffResult::memory_limited, converged
+  // false). The tables are what grows with refinement: the cells, samples, heap and edge map of
+  // both directions (HausdorffResult::table_bytes; the meshes and hierarchies come on top), each
+  // counted as the next round would grow it, old and new buffers together while one moves. The
+  // vertex pass and the first bounds always run. Unlike max_seconds, where it stops does not
+  // depend on the machine. Surfaces that coincide but are triangulated differently are the
+  // case that needs it (see Limits: two triangles at a tolerance of 1e-9 would take hundreds of
+  // gigabytes).
+  uint64_t max_bytes = 0;
   // Called from the calling thread after the vertex pass and after each refinement round.
   // Optional; it must not throw.
   std::function<void(const HausdorffProgress&)> progress;
@@ -131,8 +141,10 @@ struct HausdorffResult {
                                    // diagonal); below `tolerance` where it was raised
   bool converged = true;        // upper - lower <= tolerance (false only if refinement hit its
                                 // depth limit: sub-triangles below rounding size, or ran out of
-                                // HausdorffOptions::max_seconds)
+                                // HausdorffOptions::max_seconds or max_bytes)
   bool timed_out = false;       // stopped by HausdorffOptions::max_seconds
+  bool memory_limited = false;  // stopped by HausdorffOptions::max_bytes
+  uint64_t table_bytes = 0;     // the refinement's tables at the end (see max_bytes)
   HausdorffCounters counters;   // both directions summed
   unsigned threads = 0;         // the worker threads it could use (HausdorffOptions::threads)
   double build_seconds = 0;     // hierarchies (0 when the caller passed them)

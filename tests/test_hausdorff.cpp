@@ -406,6 +406,58 @@ TEST_CASE("max_seconds stops refinement with a certified interval") {
   }
 }
 
+// max_bytes (found by an audit: two triangulations of one square at a tolerance of 1e-9 took
+// 2.6 GB within 25 s and kept growing): refinement stops before its tables pass the limit, with
+// a certified interval (H is 0: the surfaces coincide), at the same point for any thread count;
+// a limit above what the computation needs changes nothing.
+TEST_CASE("max_bytes stops refinement with a certified interval, within the limit") {
+  Mesh a, b;
+  a.positions = b.positions = {Vec3(0, 0, 0), Vec3(1, 0, 0), Vec3(1, 1, 0), Vec3(0, 1, 0)};
+  a.triangles = {{0, 1, 2}, {0, 2, 3}};
+  b.triangles = {{1, 2, 3}, {1, 3, 0}};
+  HausdorffOptions options = absolute(1e-9, 1);
+  options.max_bytes = uint64_t{24} << 20;
+  const HausdorffResult stopped = hausdorff(a, b, options);
+  CHECK(stopped.memory_limited);
+  CHECK_FALSE(stopped.timed_out);
+  CHECK_FALSE(stopped.converged);
+  CHECK(stopped.table_bytes <= options.max_bytes);
+  CHECK(stopped.table_bytes > options.max_bytes / 4);  // it went most of the way
+  CHECK(stopped.counters.rounds > 10);
+  CHECK(stopped.lower <= 1e-15);                    // the true H, 0, lies inside
+  CHECK(stopped.upper - stopped.lower > stopped.tolerance);
+  CHECK(stopped.upper < 1e-3);                      // and the interval is a useful one
+  options.threads = 2;
+  const HausdorffResult two = hausdorff(a, b, options);
+  CHECK(two.memory_limited);
+  CHECK(two.upper == stopped.upper);
+  CHECK(two.lower == stopped.lower);
+  CHECK(two.counters.samples == stopped.counters.samples);
+  CHECK(two.table_bytes == stopped.table_bytes);
+  // One byte: stopped at the first check (the vertex pass and the first bounds always run).
+  options.max_bytes = 1;
+  const HausdorffResult first = hausdorff(a, b, options);
+  CHECK(first.memory_limited);
+  CHECK(first.counters.rounds == 0);
+  CHECK(first.lower <= 1e-15);
+  CHECK(first.upper >= stopped.upper);
+
+  // A computation that needs less than the limit: the same as without one.
+  Mesh moved = scenes::gridPlane(8, 1.0);
+  moved.positions[40].z() = 0.05;
+  HausdorffOptions plain = absolute(1e-6, 1);
+  HausdorffOptions limited = plain;
+  limited.max_bytes = uint64_t{1} << 30;
+  const HausdorffResult r0 = hausdorff(scenes::gridPlane(1, 1.0), moved, plain);
+  const HausdorffResult r1 = hausdorff(scenes::gridPlane(1, 1.0), moved, limited);
+  CHECK_FALSE(r1.memory_limited);
+  CHECK(r1.converged);
+  CHECK(r1.lower == r0.lower);
+  CHECK(r1.upper == r0.upper);
+  CHECK(r1.table_bytes == r0.table_bytes);
+  CHECK(r1.table_bytes > 0);
+}
+
 TEST_CASE("a coarse square over a grid of points: the exact maximum between the points") {
   const double h = 0.01;
   for (const int n : {20, 23}) {

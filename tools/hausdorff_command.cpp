@@ -23,7 +23,7 @@ namespace meshsweeper::cli {
 const char kHausdorffHelp[] =
     "Usage: meshsweep hausdorff A B [--tolerance T | --relative R] [--json FILE]\n"
     "                           [--colors FILE.ply] [--threads N] [--both]\n"
-    "                           [--max-seconds S]\n"
+    "                           [--max-seconds S] [--max-memory SIZE]\n"
     "\n"
     "Certified Hausdorff distance between meshes A and B (OFF, OBJ, PLY or STL), over every\n"
     "point of both surfaces, not only the vertices:\n"
@@ -45,6 +45,11 @@ const char kHausdorffHelp[] =
     "  --max-seconds S  stop refining after about S seconds (> 0) with the certified interval\n"
     "                   reached so far (converged false, timed_out true); where it stops then\n"
     "                   depends on the machine\n"
+    "  --max-memory SIZE  stop refining before its tables would pass SIZE bytes (a whole\n"
+    "                   number, or with K, M, G or T: powers of 1024) with the certified interval\n"
+    "                   reached so far (converged false, memory_limited true); the default is\n"
+    "                   half the machine's memory (or of its cgroup's limit). The meshes and\n"
+    "                   their hierarchies come on top\n"
     "  --json FILE      write the result as JSON to FILE ('-' or /dev/stdout: standard output,\n"
     "                   the summary then goes to standard error)\n"
     "  --colors FILE    write A as an ASCII PLY (double coordinates) with per-vertex 'quality'\n"
@@ -55,7 +60,8 @@ const char kHausdorffHelp[] =
     "JSON keys: a, b {path, vertices, triangles, diagonal, area}; a_to_b, b_to_a {lower, upper,\n"
     "at [x,y,z], at_triangle, closest [x,y,z], closest_triangle, mean, rms, samples, queries,\n"
     "triangles_refined, cells}; hausdorff {lower, upper}; tolerance (used); requested_tolerance;\n"
-    "converged; timed_out; threads; seconds; build_seconds; samples; queries; triangles_refined.\n"
+    "converged; timed_out; memory_limited; max_memory_bytes; table_bytes; threads; seconds;\n"
+    "build_seconds; samples; queries; triangles_refined.\n"
     "The tolerance used is the one asked for, raised where it is below the rounding floor (4e-12\n"
     "of the largest coordinate, measured from the centre of the meshes' joint box); the summary\n"
     "then says so.\n"
@@ -116,6 +122,35 @@ std::string jsonNumber(double x) {
   char text[32];
   std::snprintf(text, sizeof text, "%.17g", x);
   return text;
+}
+
+// --max-memory: a whole number of bytes, or with K, M, G or T (powers of 1024), > 0.
+uint64_t byteSize(const std::string& text) {
+  static const std::string kUnits = "KMGT";
+  const size_t unit = text.empty() ? std::string::npos : kUnits.find(text.back());
+  const int shift = unit == std::string::npos ? 0 : 10 * static_cast<int>(unit + 1);
+  const std::string digits = unit == std::string::npos ? text : text.substr(0, text.size() - 1);
+  if (digits.empty() || digits.find_first_not_of("0123456789") != std::string::npos)
+    throw UsageError("hausdorff: --max-memory must be a whole number of bytes, or one with K, M, G or T (powers of "
+                     "1024) (got '" + text + "')");
+  const uint64_t value =
+      parseInteger(digits, "hausdorff: --max-memory (bytes, or with K, M, G or T)", 1, (uint64_t{1} << 62) >> shift);
+  return value << shift;
+}
+
+// Half the memory this process may use: the machine's, or its cgroup's limit where that is
+// lower (a container's).
+uint64_t defaultMemoryLimit() {
+  const long pages = sysconf(_SC_PHYS_PAGES), page = sysconf(_SC_PAGE_SIZE);
+  uint64_t limit = pages > 0 && page > 0 ? static_cast<uint64_t>(pages) * static_cast<uint64_t>(page) : 0;
+  for (const char* path : {"/sys/fs/cgroup/memory.max", "/sys/fs/cgroup/memory/memory.limit_in_bytes"}) {
+    std::FILE* f = std::fopen(path, "r");
+    if (!f) continue;
+    unsigned long long value = 0;
+    if (std::fscanf(f, "%llu", &value) == 1 && value > 0 && (limit == 0 || value < limit)) limit = value;
+    std::fclose(f);
+  }
+  return limit / 2;  // 0 (no limit) where nothing says
 }
 
 std::string jsonPoint(const Vec3& p) {
@@ -206,6 +241,7 @@ int runHausdorff(int argc, char** argv, int first) {
                    {"--colors", true},
                    {"--threads", true},
                    {"--max-seconds", true},
+                   {"--max-memory", true},
                    {"--both", false}});
   args.expectPositional({"A", "B"});
   const std::string& a_path = args.positional()[0];
@@ -220,6 +256,7 @@ int runHausdorff(int argc, char** argv, int first) {
     options.threads = static_cast<unsigned>(args.integer("--threads", 0, 4096));
   options.tighten_both = args.has("--both");
   if (args.has("--max-seconds")) options.max_seconds = args.positiveDouble("--max-seconds");
+  options.max_bytes = args.has("--max-memory") ? byteSize(args.value("--max-memory")) : defaultMemoryLimit();
   // A file written to standard output ("-", /dev/stdout, ...) takes it over: it is written
   // through the stream itself (reopening /dev/stdout would truncate what went before), and
   // the summary goes to standard error.
@@ -286,8 +323,9 @@ int runHausdorff(int argc, char** argv, int first) {
                outwardBound(r.lower, 7, false).c_str(), outwardBound(r.upper, 7, true).c_str(),
                percentBound(r.lower, diagonal, false).c_str(), percentBound(r.upper, diagonal, true).c_str(),
                r.converged ? ""
-               : r.timed_out ? "  (tolerance not reached: stopped by --max-seconds)"
-                             : "  (tolerance not reached: refinement hit rounding size)");
+               : r.timed_out      ? "  (tolerance not reached: stopped by --max-seconds)"
+               : r.memory_limited ? "  (tolerance not reached: stopped by the memory limit, --max-memory)"
+                                  : "  (tolerance not reached: refinement hit rounding size)");
   std::fprintf(s, "  time %.3f s (hierarchies %.3f s), %llu samples, %llu triangles refined\n",
                r.seconds, r.build_seconds, static_cast<unsigned long long>(r.counters.samples),
                static_cast<unsigned long long>(r.counters.triangles_refined));
@@ -301,7 +339,10 @@ int runHausdorff(int argc, char** argv, int first) {
         ", \"upper\": " + jsonNumber(r.upper) + "},\n  \"tolerance\": " + jsonNumber(r.tolerance) +
         ",\n  \"requested_tolerance\": " + jsonNumber(r.requested_tolerance) +
         ",\n  \"converged\": " + (r.converged ? "true" : "false") +
-        ",\n  \"timed_out\": " + (r.timed_out ? "true" : "false") + ",\n  \"threads\": " +
+        ",\n  \"timed_out\": " + (r.timed_out ? "true" : "false") +
+        ",\n  \"memory_limited\": " + (r.memory_limited ? "true" : "false") +
+        ",\n  \"max_memory_bytes\": " + std::to_string(options.max_bytes) +
+        ",\n  \"table_bytes\": " + std::to_string(r.table_bytes) + ",\n  \"threads\": " +
         std::to_string(r.threads) + ",\n  \"seconds\": " + jsonNumber(r.seconds) +
         ",\n  \"build_seconds\": " + jsonNumber(r.build_seconds) +
         ",\n  \"samples\": " + std::to_string(r.counters.samples) +

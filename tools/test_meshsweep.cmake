@@ -515,6 +515,16 @@ check(hausdorff_max_seconds RC 0 ARGS hausdorff square_a.off square_b.off --rela
   ERR "(tolerance not reached: stopped by --max-seconds)")
 check(hausdorff_max_seconds_zero RC 2 ARGS hausdorff quad.off point.off --max-seconds 0
   ERR "--max-seconds must be > 0 (got 0)")
+# --max-memory: the same pair stops before its tables pass 16 MiB, exit 0; the default limit is
+# reported; a size that is not a whole number of bytes (with K, M, G or T) is refused.
+check(hausdorff_max_memory RC 0 ARGS hausdorff square_a.off square_b.off --tolerance 1e-9 --max-memory 16M
+  --threads 1 --json - OUT "\"memory_limited\": true" "\"converged\": false" "\"max_memory_bytes\": 16777216"
+  ERR "(tolerance not reached: stopped by the memory limit, --max-memory)")
+check(hausdorff_memory_default RC 0 ARGS hausdorff quad.off quad.off --json -
+  OUT "\"memory_limited\": false" "\"max_memory_bytes\": " "\"table_bytes\": ")
+foreach(bad 0 1.5G 2X -5 5000000000G)
+  check(hausdorff_max_memory_bad_${bad} RC 2 ARGS hausdorff quad.off quad.off --max-memory ${bad} ERR "--max-memory")
+endforeach()
 check(hausdorff_tolerance_rounds_to_zero RC 2 ARGS hausdorff quad.off point.off --tolerance 1e-400
   ERR "--tolerance must be > 0 (got 1e-400, which rounds to 0)")
 check(hausdorff_relative_zero RC 2 ARGS hausdorff quad.off point.off --relative 0.0
