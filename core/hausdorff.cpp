@@ -746,6 +746,13 @@ class Direction {
            capacityBytes(batch_) + capacityBytes(mids_) + capacityBytes(new_ids_) + capacityBytes(child_first_) +
            capacityBytes(thin_) + capacityBytes(order_);
   }
+  // Whether the next refine() could number cells or samples past 32 bits (their ids): about
+  // 300 GB of tables, reached only without a max_bytes.
+  bool idsFull() const {
+    const size_t batch = std::min(heap_.size(), std::clamp(heap_.size() / kBatchDivisor, kMinBatch, kMaxBatch));
+    constexpr size_t kIds = std::numeric_limits<uint32_t>::max();
+    return cells_.size() + 4 * batch >= kIds || samples_.size() + 3 * batch >= kIds;
+  }
   uint64_t bytesAfterRound() const {
     const size_t batch = std::min(heap_.size(), std::clamp(heap_.size() / kBatchDivisor, kMinBatch, kMaxBatch));
     return bytes() + (grownBytes(cells_, 4 * batch) - capacityBytes(cells_)) +
@@ -1201,13 +1208,12 @@ HausdorffResult run(const Mesh& a, const std::shared_ptr<const Hierarchy>& a_hie
           ba && excess_ba > 0 &&
           (!(excess_ab > 0) ||
            (options.tighten_both ? excess_ba > excess_ab : ba->topUpper() > ab.topUpper()));
-      if (options.max_bytes > 0) {
-        const Direction& picked = pick_ba ? *ba : ab;
-        const uint64_t after = ab.bytes() + (ba ? ba->bytes() : 0) + (picked.bytesAfterRound() - picked.bytes());
-        if (after > options.max_bytes) {
-          result.memory_limited = true;  // not within the tolerance yet
-          break;
-        }
+      const Direction& picked = pick_ba ? *ba : ab;
+      if (picked.idsFull() ||
+          (options.max_bytes > 0 &&
+           ab.bytes() + (ba ? ba->bytes() : 0) + (picked.bytesAfterRound() - picked.bytes()) > options.max_bytes)) {
+        result.memory_limited = true;  // not within the tolerance yet
+        break;
       }
       if (pick_ba)
         ba->refine(floor_ba, tol);

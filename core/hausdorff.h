@@ -143,7 +143,8 @@ struct HausdorffResult {
                                 // depth limit: sub-triangles below rounding size, or ran out of
                                 // HausdorffOptions::max_seconds or max_bytes)
   bool timed_out = false;       // stopped by HausdorffOptions::max_seconds
-  bool memory_limited = false;  // stopped by HausdorffOptions::max_bytes
+  bool memory_limited = false;  // stopped by HausdorffOptions::max_bytes (or at 2^32 cells or
+                                // samples in a direction, their ids' limit)
   uint64_t table_bytes = 0;     // the refinement's tables at the end (see max_bytes)
   HausdorffCounters counters;   // both directions summed
   unsigned threads = 0;         // the worker threads it could use (HausdorffOptions::threads)
