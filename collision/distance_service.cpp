@@ -105,6 +105,10 @@ struct Body {
   TreeGeometry rest;  // the hierarchy's rest geometry (rigid bodies, in the body frame)
   Box3 box;
   double scale = 0;  // the largest coordinate of the box, plus the pose's translation's
+  // At least the largest coordinate of a vertex in the frame the queries run in (the rest box's
+  // for a rigid body, the box's for a body queried in the world; infinite for a framed one):
+  // makeHit reads a hit's corners only for a distance within their rounding.
+  double corner_scale = kInf;
   bool box_dirty = true;
   // The placement's orientation (BodyShape::orientationAt), refreshed with the box: a
   // key-framed or deforming closed body can be placed as a mirror image of its mesh. It is
@@ -636,6 +640,10 @@ struct DistanceService::Impl {
     }
     b.box = box;
     b.scale = box.lower.cwiseAbs().cwiseMax(box.upper.cwiseAbs()).maxCoeff();
+    b.corner_scale = b.kind == BodyKind::kRigid
+                         ? b.shape->restLower().cwiseAbs().cwiseMax(b.shape->restUpper().cwiseAbs()).maxCoeff()
+                     : b.framed ? kInf
+                                : b.scale;
     if (const Eigen::Isometry3d* pose = b.pose()) b.scale += pose->translation().cwiseAbs().maxCoeff();
   }
 
@@ -715,9 +723,11 @@ struct DistanceService::Impl {
     // corners (restSide's band): near a large face that passes close to the frame's origin, q's
     // coordinates are small but c carries those of the corners (found by review: a point 4e-12
     // inside a face whose corners lie 1e5 away was signed by the noise of its closest point).
-    const Triangle& corners = shape.mesh().triangles[face];
-    const Vec3* x = b.positions();
-    for (int k = 0; k < 3; ++k) touch = std::max(touch, kSurfaceRounding * x[corners[k]].cwiseAbs().maxCoeff());
+    if (distance > touch && distance <= kSurfaceRounding * b.corner_scale) {
+      const Triangle& corners = shape.mesh().triangles[face];
+      const Vec3* x = b.positions();
+      for (int k = 0; k < 3; ++k) touch = std::max(touch, kSurfaceRounding * x[corners[k]].cwiseAbs().maxCoeff());
+    }
     const bool on_surface = !(distance > touch) || !(length > 0);
     // The pseudonormal gives a closed body's sign, and the direction on the surface; an open
     // moving body skips it otherwise (evaluated at the current positions, it is not free).
