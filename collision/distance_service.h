@@ -128,9 +128,10 @@ struct DistanceHit {
   Vec3 point = Vec3::Zero();               // closest point on the body's surface
   Vec3 barycentric = Vec3::Zero();         // point = b0*A + b1*B + b2*C of the triangle
   // Unit vector from `point` to the query point. On the surface (a distance of at most 16 eps times
-  // the coordinates involved, the query point's, the hit triangle's corners' and the frame's
-  // translation's included for a rigid body or a framed deforming one, which rounding alone can
-  // make of a point lying exactly on a face: the offset's direction is noise there), the feature's
+  // the coordinates involved: the point's in the body's frame and the hit triangle's corners',
+  // and for a rigid body or a framed deforming one also the query point's and the frame's
+  // translation's; rounding alone can make that of a point lying exactly on a face, and the
+  // offset's direction is noise there), the feature's
   // pseudonormal (outward for a closed body, whose sign is then kOutside), normalised; the zero
   // vector where that pseudonormal is zero: a feature whose faces all have zero area, or whose
   // face normals cancel (an open mesh whose two faces at an edge are oriented against each other

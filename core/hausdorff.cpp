@@ -176,16 +176,25 @@ struct MeanSums {
   double area = 0, sum = 0, sum2 = 0;
 };
 
-// A vector's bytes (its capacity), and at most while `extra` more elements go in: it grows to
-// max(2 size, size + extra) (libstdc++; other libraries grow by less), its old and new buffers
-// both held while the elements move.
+// A table's bytes (its capacity), and at most while it grows to `needed` elements (libstdc++'s
+// growth; other libraries grow by less), old and new buffers both held while the elements move:
+// push_back doubles a full capacity, as often as it takes (only the last old buffer is still
+// held); resize and assign take max(2 size, needed) at once.
 template <class T>
 uint64_t capacityBytes(const std::vector<T>& v) {
   return v.capacity() * sizeof(T);
 }
 template <class T>
-uint64_t grownBytes(const std::vector<T>& v, size_t extra) {
-  const size_t needed = v.size() + extra;
+uint64_t pushedBytes(const std::vector<T>& v, size_t needed) {
+  size_t capacity = v.capacity(), previous = capacity;
+  while (capacity < needed) {
+    previous = capacity;
+    capacity = std::max<size_t>(1, 2 * capacity);
+  }
+  return (capacity == v.capacity() ? capacity : previous + capacity) * sizeof(T);
+}
+template <class T>
+uint64_t resizedBytes(const std::vector<T>& v, size_t needed) {
   if (needed <= v.capacity()) return capacityBytes(v);
   return (v.capacity() + std::max(2 * v.size(), needed)) * sizeof(T);
 }
@@ -213,13 +222,17 @@ class EdgeMap {
     return fresh;
   }
 
-  // Its bytes now, and at most while `inserts` more go in (old and new tables while it grows).
+  // Its bytes now, and at most while `inserts` more go in: it may grow more than once, and holds
+  // the last old table and the new one while it moves the entries.
   uint64_t bytes() const { return keys_.capacity() * sizeof(uint64_t) + values_.capacity() * sizeof(uint32_t); }
   uint64_t bytesAfter(size_t inserts) const {
-    size_t slots = keys_.size();
-    while (2 * (size_ + inserts) > slots) slots = std::max<size_t>(1024, 2 * slots);
+    size_t slots = keys_.size(), previous = slots;
+    while (2 * (size_ + inserts) > slots) {
+      previous = slots;
+      slots = std::max<size_t>(1024, 2 * slots);
+    }
     const uint64_t per_slot = sizeof(uint64_t) + sizeof(uint32_t);
-    return slots == keys_.size() ? bytes() : bytes() + slots * per_slot;
+    return slots == keys_.size() ? bytes() : std::max(bytes(), (previous + slots) * per_slot);
   }
 
  private:
@@ -739,27 +752,34 @@ class Direction {
   }
 
   // The refinement's tables (HausdorffOptions::max_bytes): their bytes now, and at most during
-  // the next refine(), which adds up to 4 cells, 3 samples, 3 edges and 3 net heap entries per
-  // cell of its batch.
+  // the next refine(). A round of b cells adds up to 4 b cells, 3 b midpoint samples and one
+  // sample per chunk of kCellChunk cells (a cover bound's best point), 3 b edges, and 4 b heap
+  // entries after popping b; its scratch tables hold b or 3 b entries, or a chunk's.
   uint64_t bytes() const {
     return capacityBytes(cells_) + capacityBytes(samples_) + capacityBytes(heap_) + edges_.bytes() +
            capacityBytes(batch_) + capacityBytes(mids_) + capacityBytes(new_ids_) + capacityBytes(child_first_) +
-           capacityBytes(thin_) + capacityBytes(order_);
+           capacityBytes(thin_) + capacityBytes(order_) + capacityBytes(chunk_best_) + capacityBytes(chunk_queries_);
   }
+  size_t nextBatch() const {
+    return std::min(heap_.size(), std::clamp(heap_.size() / kBatchDivisor, kMinBatch, kMaxBatch));
+  }
+  static size_t newSamples(size_t batch) { return 3 * batch + (batch + kCellChunk - 1) / kCellChunk; }
   // Whether the next refine() could number cells or samples past 32 bits (their ids): about
   // 300 GB of tables, reached only without a max_bytes.
   bool idsFull() const {
-    const size_t batch = std::min(heap_.size(), std::clamp(heap_.size() / kBatchDivisor, kMinBatch, kMaxBatch));
+    const size_t batch = nextBatch();
     constexpr size_t kIds = std::numeric_limits<uint32_t>::max();
-    return cells_.size() + 4 * batch >= kIds || samples_.size() + 3 * batch >= kIds;
+    return cells_.size() + 4 * batch >= kIds || samples_.size() + newSamples(batch) >= kIds;
   }
   uint64_t bytesAfterRound() const {
-    const size_t batch = std::min(heap_.size(), std::clamp(heap_.size() / kBatchDivisor, kMinBatch, kMaxBatch));
-    return bytes() + (grownBytes(cells_, 4 * batch) - capacityBytes(cells_)) +
-           (grownBytes(samples_, 3 * batch) - capacityBytes(samples_)) +
-           (grownBytes(heap_, 3 * batch) - capacityBytes(heap_)) + (edges_.bytesAfter(3 * batch) - edges_.bytes()) +
-           (grownBytes(mids_, 3 * batch) - capacityBytes(mids_)) + (grownBytes(order_, 3 * batch) - capacityBytes(order_)) +
-           (grownBytes(new_ids_, 3 * batch) - capacityBytes(new_ids_));
+    const size_t b = nextBatch(), chunks = (b + kCellChunk - 1) / kCellChunk;
+    const uint64_t peaks =
+        resizedBytes(cells_, cells_.size() + 4 * b) + pushedBytes(samples_, samples_.size() + newSamples(b)) +
+        pushedBytes(heap_, heap_.size() + 3 * b) + edges_.bytesAfter(3 * b) + pushedBytes(batch_, b) +
+        resizedBytes(mids_, 3 * b) + resizedBytes(new_ids_, 3 * b) + resizedBytes(child_first_, b + 1) +
+        resizedBytes(thin_, b) + resizedBytes(order_, 3 * b) + resizedBytes(chunk_best_, chunks) +
+        resizedBytes(chunk_queries_, chunks);
+    return std::max(bytes(), peaks);
   }
 
   double lower() const { return lb_; }

@@ -413,10 +413,10 @@ std::string checkOffBody(std::istream& in, const OffHeader& header) {
   while (static_cast<std::uint64_t>(in.tellg()) < header.body_offset && std::getline(in, line))
     ++line_number;
   bool vertex_colours = false, face_colours = false;  // COFF: a vertex (face) before had a colour
-  // The first vertex line with more numbers than a vertex takes (no colours declared): CGAL
-  // ignores them, but where the file then fails, vertices written several to a line (a
-  // free-format OFF) are the likely cause, and the message says so (found by an audit: such
-  // a file was said to end after its first face).
+  // The first vertex line with numbers enough for two vertices (no colours declared): CGAL
+  // ignores those past the first, but where the file then fails, vertices written several to a
+  // line (a free-format OFF) are the likely cause, and the message says so (found by an audit:
+  // such a file was said to end after its first face).
   std::uint64_t crowded_line = 0, crowded_numbers = 0, crowded_needed = 0;
   auto hinted = [&](std::string problem) {
     if (crowded_line != 0)
@@ -452,7 +452,17 @@ std::string checkOffBody(std::istream& in, const OffHeader& header) {
                     plural(numbers, "number") + ", but a vertex of " + header.keyword + " needs " + std::to_string(needed) +
                     " (" + std::to_string(3 + h) + " coordinates" + (header.normals ? ", a normal" : "") +
                     (header.textures ? ", texture coordinates" : "") + ")");
-    if (!header.colors && numbers > needed && crowded_line == 0) {
+    // Room for a second vertex, and not a face read as a vertex (a corner count k and k
+    // indices), which a header counting too many vertices makes (found by review).
+    const auto face_shaped = [&] {
+      std::int64_t corners = 0, index = 0;
+      if (!parseInteger(words[0], corners) || corners < 3 || static_cast<std::uint64_t>(corners) + 1 != numbers)
+        return false;
+      for (std::size_t k = 1; k < numbers; ++k)
+        if (!parseInteger(words[k], index) || index < 0) return false;
+      return true;
+    };
+    if (!header.colors && numbers >= 2 * needed && crowded_line == 0 && !face_shaped()) {
       crowded_line = line_number;
       crowded_numbers = numbers;
       crowded_needed = needed;
@@ -963,14 +973,15 @@ PlyHeader parsePlyHeader(const std::string& path, std::istream& in) {
     // Two vertex (or face) elements are read one after the other by CGAL, and a face list under
     // both names by one of them: which is meant is not said, so neither is guessed (found by an
     // audit).
+    // (An element of no items reads nothing and is let be.)
     const PlyElement*& first = isVertexElement(element.name) ? vertex_element : face_element;
-    if (isVertexElement(element.name) || isFaceElement(element.name)) {
+    if ((isVertexElement(element.name) || isFaceElement(element.name)) && element.count > 0) {
       if (first != nullptr)
         fail(path, what + " follows element '" + first->name + "': a PLY file with two " +
                        (isVertexElement(element.name) ? "vertex" : "face") + " elements is ambiguous");
       first = &element;
     }
-    if (isFaceElement(element.name) && element.find("vertex_indices") != nullptr &&
+    if (isFaceElement(element.name) && element.count > 0 && element.find("vertex_indices") != nullptr &&
         element.find("vertex_index") != nullptr)
       fail(path, what + " has both 'vertex_indices' and 'vertex_index' lists: which holds the corners is ambiguous");
     if (element.properties.empty() && element.count > 0) fail(path, what + " has no properties");

@@ -1300,6 +1300,12 @@ TEST_CASE("readMesh refuses indices that are not integers, and data past the dec
                       "takes 3: OFF is read one vertex, and one face, a line)"));
   CHECK(meshsweeper::readMesh(dir.write("fourth.off", "OFF\n3 1 0\n0 0 0 9\n1 0 0\n0 1 0\n3 0 1 2\n")).positions ==
         std::vector<Vec3>{{0, 0, 0}, {1, 0, 0}, {0, 1, 0}});
+  // Found by review: no hint where the line is innocent: a fourth number alone, or a face read
+  // as a vertex because the header counts one vertex too many.
+  CHECK_THAT(readError(dir.write("fourth_bad.off", "OFF\n3 1 0\n0 0 0 1\n1 0 0\n0 1 0\n3 0 1 5\n")),
+             Contains("face 0 uses vertex 5") && !Contains("holds"));
+  CHECK_THAT(readError(dir.write("count.off", "OFF\n6 2 0\n0 0 0\n1 0 0\n1 1 0\n0.5 2 0\n0 1 0\n5 0 1 2 3 4\n3 0 1 2\n")),
+             Contains("the file ends after 1 face of the 2 declared") && !Contains("holds"));
   // Comments and blank lines after the faces are fine; so are per-face colours.
   CHECK(meshsweeper::readMesh(dir.write("ok.off", head + "3 0 1 2 255 0 0 # red\n\n# end\n")).triangles.size() == 1);
   // So is a DOS end-of-file byte (0x1A) as the last word of a text file, in every text format;
@@ -1469,6 +1475,12 @@ TEST_CASE("ASCII PLY: repeated properties refused, long values read whole", "[me
                                  "element faces 1\nproperty list uchar int vertex_indices\nend_header\n"
                                  "0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n3 0 2 1\n")),
              Contains("PLY element 'faces' follows element 'face'") && Contains("two face elements is ambiguous"));
+  // A second element of no items reads nothing: read as one (found by review).
+  CHECK(meshsweeper::readMesh(dir.write("empty_second.ply", xyz +
+                                        "element face 1\nproperty list uchar int vertex_indices\n"
+                                        "element face 0\nproperty list uchar int vertex_indices\nend_header\n"
+                                        "0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n"))
+            .triangles.size() == 1);
   const Mesh mesh = meshsweeper::readMesh(dir.write("long.ply",
       "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
       "element face 1\nproperty list uchar int vertex_indices\nend_header\n"

@@ -8,8 +8,11 @@
 #include <Eigen/Geometry>
 
 #include <algorithm>
+#include <cctype>
+#include <cerrno>
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <filesystem>
 #include <limits>
 #include <memory>
@@ -48,8 +51,9 @@ const char kHausdorffHelp[] =
     "  --max-memory SIZE  stop refining before its tables would pass SIZE bytes (a whole\n"
     "                   number, or with K, M, G or T: powers of 1024) with the certified interval\n"
     "                   reached so far (converged false, memory_limited true); the default is\n"
-    "                   half the machine's memory (or of its cgroup's limit). The meshes and\n"
-    "                   their hierarchies come on top\n"
+    "                   half the machine's memory, or of its cgroups' lowest limit (the JSON's\n"
+    "                   max_memory_bytes; 0 there: no limit found). The meshes and their\n"
+    "                   hierarchies come on top\n"
     "  --json FILE      write the result as JSON to FILE ('-' or /dev/stdout: standard output,\n"
     "                   the summary then goes to standard error)\n"
     "  --colors FILE    write A as an ASCII PLY (double coordinates) with per-vertex 'quality'\n"
@@ -124,32 +128,77 @@ std::string jsonNumber(double x) {
   return text;
 }
 
-// --max-memory: a whole number of bytes, or with K, M, G or T (powers of 1024), > 0.
+// --max-memory: a whole number of bytes, or one with K, M, G or T (either case; powers of
+// 1024), from 1 byte to 2^62 bytes.
 uint64_t byteSize(const std::string& text) {
   static const std::string kUnits = "KMGT";
-  const size_t unit = text.empty() ? std::string::npos : kUnits.find(text.back());
+  const char last = text.empty() ? '\0' : static_cast<char>(std::toupper(static_cast<unsigned char>(text.back())));
+  const size_t unit = last == '\0' ? std::string::npos : kUnits.find(last);
   const int shift = unit == std::string::npos ? 0 : 10 * static_cast<int>(unit + 1);
   const std::string digits = unit == std::string::npos ? text : text.substr(0, text.size() - 1);
-  if (digits.empty() || digits.find_first_not_of("0123456789") != std::string::npos)
-    throw UsageError("hausdorff: --max-memory must be a whole number of bytes, or one with K, M, G or T (powers of "
-                     "1024) (got '" + text + "')");
-  const uint64_t value =
-      parseInteger(digits, "hausdorff: --max-memory (bytes, or with K, M, G or T)", 1, (uint64_t{1} << 62) >> shift);
-  return value << shift;
+  const uint64_t most = (uint64_t{1} << 62) >> shift;
+  errno = 0;
+  const unsigned long long value =
+      digits.empty() || digits.find_first_not_of("0123456789") != std::string::npos ? 0 : std::strtoull(digits.c_str(), nullptr, 10);
+  if (value == 0 || errno == ERANGE || value > most)
+    throw UsageError("hausdorff: --max-memory must be a whole number of bytes from 1 to 2^62, or one with K, M, G or T "
+                     "(powers of 1024) (got '" + text + "')");
+  return static_cast<uint64_t>(value) << shift;
 }
 
-// Half the memory this process may use: the machine's, or its cgroup's limit where that is
-// lower (a container's).
+// A memory limit file's value (cgroup v1 memory.limit_in_bytes, v2 memory.max), or 0 where it
+// is missing or says "max" (v1's "unlimited" is a number far above the machine's memory).
+uint64_t cgroupLimit(const std::string& path) {
+  std::FILE* f = std::fopen(path.c_str(), "r");
+  if (!f) return 0;
+  unsigned long long value = 0;
+  const bool read = std::fscanf(f, "%llu", &value) == 1;
+  std::fclose(f);
+  return read ? value : 0;
+}
+
+// Half the memory this process may use: the machine's, or the lowest limit of the cgroups it
+// runs in where that is lower (its own memory cgroup and each above it, v1 and v2, as
+// /proc/self/cgroup names them; inside a container's namespace, the root's files).
 uint64_t defaultMemoryLimit() {
   const long pages = sysconf(_SC_PHYS_PAGES), page = sysconf(_SC_PAGE_SIZE);
   uint64_t limit = pages > 0 && page > 0 ? static_cast<uint64_t>(pages) * static_cast<uint64_t>(page) : 0;
-  for (const char* path : {"/sys/fs/cgroup/memory.max", "/sys/fs/cgroup/memory/memory.limit_in_bytes"}) {
-    std::FILE* f = std::fopen(path, "r");
-    if (!f) continue;
-    unsigned long long value = 0;
-    if (std::fscanf(f, "%llu", &value) == 1 && value > 0 && (limit == 0 || value < limit)) limit = value;
+  auto lower = [&](uint64_t value) {
+    if (value > 0 && (limit == 0 || value < limit)) limit = value;
+  };
+  // "ID:CONTROLLERS:PATH": v2 is "0::PATH", v1's memory controller lists "memory".
+  std::vector<std::string> files;
+  if (std::FILE* f = std::fopen("/proc/self/cgroup", "r")) {
+    char text[4096];
+    while (std::fgets(text, sizeof text, f)) {
+      std::string line(text);
+      if (!line.empty() && line.back() == '\n') line.pop_back();
+      const size_t first = line.find(':'), second = first == std::string::npos ? first : line.find(':', first + 1);
+      if (second == std::string::npos) continue;
+      const std::string controllers = line.substr(first + 1, second - first - 1);
+      std::string path = line.substr(second + 1);
+      bool v1_memory = false;
+      for (size_t at = 0; at <= controllers.size();) {
+        const size_t end = std::min(controllers.find(',', at), controllers.size());
+        v1_memory = v1_memory || controllers.compare(at, end - at, "memory") == 0;
+        at = end + 1;
+      }
+      const bool v2 = line.compare(0, 2, "0:") == 0 && controllers.empty();
+      if (!v2 && !v1_memory) continue;
+      const std::string root = v2 ? "/sys/fs/cgroup" : "/sys/fs/cgroup/memory";
+      const char* name = v2 ? "/memory.max" : "/memory.limit_in_bytes";
+      while (true) {  // the cgroup and each one above it
+        files.push_back(root + (path == "/" ? "" : path) + name);
+        const size_t slash = path.find_last_of('/');
+        if (path.empty() || path == "/" || slash == std::string::npos) break;
+        path = slash == 0 ? "/" : path.substr(0, slash);
+      }
+    }
     std::fclose(f);
   }
+  files.push_back("/sys/fs/cgroup/memory.max");  // a container's own, where the paths above are
+  files.push_back("/sys/fs/cgroup/memory/memory.limit_in_bytes");  // not visible
+  for (const std::string& file : files) lower(cgroupLimit(file));
   return limit / 2;  // 0 (no limit) where nothing says
 }
 

@@ -521,9 +521,12 @@ check(hausdorff_max_memory RC 0 ARGS hausdorff square_a.off square_b.off --toler
   --threads 1 --json - OUT "\"memory_limited\": true" "\"converged\": false" "\"max_memory_bytes\": 16777216"
   ERR "(tolerance not reached: stopped by the memory limit, --max-memory)")
 check(hausdorff_memory_default RC 0 ARGS hausdorff quad.off quad.off --json -
-  OUT "\"memory_limited\": false" "\"max_memory_bytes\": " "\"table_bytes\": ")
-foreach(bad 0 1.5G 2X -5 5000000000G)
-  check(hausdorff_max_memory_bad_${bad} RC 2 ARGS hausdorff quad.off quad.off --max-memory ${bad} ERR "--max-memory")
+  OUT "\"memory_limited\": false" "\"max_memory_bytes\": " "\"table_bytes\": " NOT_OUT "\"max_memory_bytes\": 0,")
+check(hausdorff_max_memory_lower RC 0 ARGS hausdorff quad.off quad.off --max-memory 3g --json -
+  OUT "\"max_memory_bytes\": 3221225472")
+foreach(bad 0 1.5G 2X -5 5000000000G 4194305T)
+  check(hausdorff_max_memory_bad_${bad} RC 2 ARGS hausdorff quad.off quad.off --max-memory ${bad}
+    ERR "--max-memory must be a whole number of bytes from 1 to 2^62, or one with K, M, G or T (powers of 1024) (got '${bad}')")
 endforeach()
 check(hausdorff_tolerance_rounds_to_zero RC 2 ARGS hausdorff quad.off point.off --tolerance 1e-400
   ERR "--tolerance must be > 0 (got 1e-400, which rounds to 0)")
