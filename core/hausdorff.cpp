@@ -1194,6 +1194,7 @@ HausdorffResult run(const Mesh& a, const std::shared_ptr<const Hierarchy>& a_hie
     Direction ab(a, b_hierarchy, scale, parallel);
     std::unique_ptr<Direction> ba;
     if (symmetric) ba = std::make_unique<Direction>(b, a_hierarchy, scale, parallel);
+    auto tableBytes = [&] { return ab.bytes() + (ba ? ba->bytes() : 0); };  // HausdorffOptions::max_bytes
     auto report = [&] {
       if (!options.progress) return;
       HausdorffProgress p;
@@ -1230,8 +1231,7 @@ HausdorffResult run(const Mesh& a, const std::shared_ptr<const Hierarchy>& a_hie
            (options.tighten_both ? excess_ba > excess_ab : ba->topUpper() > ab.topUpper()));
       const Direction& picked = pick_ba ? *ba : ab;
       if (picked.idsFull() ||
-          (options.max_bytes > 0 &&
-           ab.bytes() + (ba ? ba->bytes() : 0) + (picked.bytesAfterRound() - picked.bytes()) > options.max_bytes)) {
+          (options.max_bytes > 0 && tableBytes() + (picked.bytesAfterRound() - picked.bytes()) > options.max_bytes)) {
         result.memory_limited = true;  // not within the tolerance yet
         break;
       }
@@ -1241,7 +1241,7 @@ HausdorffResult run(const Mesh& a, const std::shared_ptr<const Hierarchy>& a_hie
         ab.refine(floor_ab, tol);
       report();
     }
-    result.table_bytes = ab.bytes() + (ba ? ba->bytes() : 0);
+    result.table_bytes = tableBytes();
     ab.finish(result.a_to_b);
     addCounters(result.counters, result.a_to_b.counters);
     result.converged = ab.converged();

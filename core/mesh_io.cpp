@@ -553,7 +553,7 @@ bool knownObjStatement(std::string_view word) {
 }
 
 std::string checkObjFaces(const std::string& text) {
-  std::uint64_t vertices = 0;
+  std::uint64_t vertices = 0, faces = 0;
   for (int pass = 1; pass <= 2; ++pass) {
     std::istringstream in(text);
     std::string line;
@@ -622,7 +622,11 @@ std::string checkObjFaces(const std::string& text) {
       ++face;
     }
     vertices = so_far;
+    faces = face;
   }
+  // CGAL's reader refuses a file without both.
+  if (vertices == 0) return "the OBJ file has no vertices ('v' lines)";
+  if (faces == 0) return "the OBJ file has no faces ('f' lines)";
   return {};
 }
 
@@ -772,57 +776,6 @@ void triangulatePolygon(const std::vector<Vec3>& x, std::vector<VertexIndex>& ri
     if (!cut) break;
   }
   fan();
-}
-
-// Called when CGAL rejected an OBJ file: finds the line it stopped at, the way its read_OBJ
-// reads (one statement per line; statements it does not know make it fail). Returns an empty
-// string when nothing is found.
-std::string diagnoseObj(std::istream& in) {
-  std::string line;
-  std::uint64_t vertices = 0, faces = 0;
-  // Pass 1: statements and vertices; pass 2: face indices against the vertex count.
-  for (int pass = 1; pass <= 2; ++pass) {
-    in.clear();
-    in.seekg(0);
-    std::uint64_t line_number = 0, face = 0;
-    while (std::getline(in, line)) {
-      ++line_number;
-      const auto words = splitWords(line);
-      if (words.empty() || words[0][0] == '#') continue;
-      const std::string at = "line " + std::to_string(line_number) + ": ";
-      if (pass == 2) {
-        if (words[0] != "f") continue;
-        for (std::size_t k = 1; k < words.size(); ++k) {
-          const std::string_view index = words[k].substr(0, words[k].find('/'));
-          std::int64_t i = 0;
-          if (!parseInteger(index, i))
-            return at + "face " + std::to_string(face) + ": " + shown(words[k]) +
-                   " is not a vertex index";
-          if (i == 0 || (i > 0 && static_cast<std::uint64_t>(i) > vertices) ||
-              (i < 0 && static_cast<std::uint64_t>(-i) > vertices))
-            return at + "face " + std::to_string(face) + " uses OBJ index " + std::string(index) +
-                   " but the file has " + plural(vertices, "vertex");
-        }
-        ++face;
-        continue;
-      }
-      if (!knownObjStatement(words[0])) return at + "unsupported OBJ statement " + shown(words[0]);
-      if (words[0] == "f") ++faces;
-      if (words[0] != "v") continue;
-      ++vertices;
-      for (std::size_t k = 1; k <= 3; ++k) {
-        double value;
-        if (k >= words.size())
-          return at + "vertex " + std::to_string(vertices - 1) + " has fewer than 3 coordinates";
-        if (parseDouble(words[k], value) != NumberStatus::kOk)
-          return at + "vertex " + std::to_string(vertices - 1) + ": " + shown(words[k]) +
-                 " is not a finite number";
-      }
-    }
-    if (vertices == 0) return "the OBJ file has no vertices ('v' lines)";
-    if (faces == 0) return "the OBJ file has no faces ('f' lines)";
-  }
-  return {};
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -1629,8 +1582,7 @@ bool checkStl(const std::string& path, std::istream& in, std::uint64_t file_size
 
 // ---------------------------------------------------------------------------------------------
 
-std::string cgalRejected(Format format, const std::string& diagnosis) {
-  if (!diagnosis.empty()) return diagnosis;
+std::string cgalRejected(Format format) {
   switch (format) {
     case Format::kOff:
       return "malformed OFF data (vertex lines need 3 numbers, face lines 'k i1 ... ik' with "
@@ -1843,9 +1795,7 @@ Mesh readMeshFrom(const std::string& path) {
     fail(path, std::string("CGAL's reader failed: ") + e.what());
   }
   if (!ok) {
-    std::string diagnosis;
-    if (format == Format::kObj) diagnosis = diagnoseObj(source);
-    fail(path, cgalRejected(format, diagnosis));
+    fail(path, cgalRejected(format));
   }
 
   Mesh mesh;
