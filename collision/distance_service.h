@@ -52,7 +52,7 @@ using PointMatrix = Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor>;
 using PointRows = Eigen::Ref<const PointMatrix>;
 
 // The points (or positions) a call reads: any Eigen matrix or expression of doubles with three
-// columns, one row (x, y, z) per point. A PointMatrix or a row-major map with three columns is
+// columns, one row (x, y, z) per point, or a std::vector<Vec3>. A PointMatrix or a row-major map with three columns is
 // read in place; any other layout (a column-major Eigen::MatrixXd, a block) is copied once for
 // the call. A matrix whose column count is fixed at another number does not compile; a dynamic
 // one (Eigen::MatrixXd) with another count throws std::invalid_argument before the call does
@@ -65,6 +65,13 @@ class PointsRef {
       : matrix_((requireThreeColumns(points.cols()), points.derived())) {
     static_assert(Derived::ColsAtCompileTime == Eigen::Dynamic || Derived::ColsAtCompileTime == 3,
                   "points and positions need three columns (x, y, z)");
+  }
+  // A std::vector of points, read in place (Vec3 is three packed doubles: the vector is a
+  // row-major n x 3 array).
+  PointsRef(const std::vector<Vec3>& points)  // NOLINT(google-explicit-constructor): as above
+      : matrix_(Eigen::Map<const PointMatrix>(points.empty() ? nullptr : points.front().data(),
+                                              static_cast<Eigen::Index>(points.size()), 3)) {
+    static_assert(sizeof(Vec3) == 3 * sizeof(double), "Vec3 is three packed doubles");
   }
   // Not copyable: the view may hold the copy it made, which a copy of Eigen::Ref would not own.
   PointsRef(const PointsRef&) = delete;
@@ -127,7 +134,8 @@ struct DistanceHit {
   double signed_distance = 0;              // -distance inside a closed body, else +distance
   Vec3 point = Vec3::Zero();               // closest point on the body's surface
   Vec3 barycentric = Vec3::Zero();         // point = b0*A + b1*B + b2*C of the triangle
-  // Unit vector from `point` to the query point. On the surface (a distance of at most 16 eps times
+  // Unit vector from `point` to the query point (inward for a point inside a closed body:
+  // negate it there for the way out). On the surface (a distance of at most 16 eps times
   // the coordinates involved: the point's in the body's frame and the hit triangle's corners',
   // and for a rigid body or a framed deforming one also the query point's and the frame's
   // translation's; rounding alone can make that of a point lying exactly on a face, and the
@@ -378,8 +386,12 @@ class DistanceService {
   // Every accessor and setter below throws std::invalid_argument for a stale handle, or for a
   // body of the wrong kind.
   BodyKind kind(BodyHandle body) const;
+  // The body's shape (closed or open, why, inward or not). The reference is valid until the
+  // body's remove(), and no longer unless another body shares the shape: the service holds a
+  // shape only while a body uses it. shapeFor(hierarchy) gives a shared_ptr that keeps it.
   const BodyShape& shape(BodyHandle body) const;
-  // kRigid.
+  // kRigid. pose(): the pose answers are exact for (setPose's, re-orthonormalised); the
+  // reference reads the latest setPose() and is valid until the body's remove().
   void setPose(BodyHandle body, const Eigen::Isometry3d& pose);
   const Eigen::Isometry3d& pose(BodyHandle body) const;
   // The frame the body's queries run in, placed in the world: a rigid body's pose; a deforming

@@ -1716,6 +1716,9 @@ TEST_CASE("Eigen positions: starting positions, key frames and batch entries in 
     DistanceService braced;
     const BodyHandle k = braced.addKeyframed(braced.hierarchyFor(sphere), {frame0, frame_matrices[1]}, 0.3);
     CHECK(braced.positions(k) == vectors.positions(ka));
+    const BodyHandle kv = braced.addKeyframed(braced.hierarchyFor(sphere), {frames[0], frames[1]}, 0.3);
+    CHECK(braced.positions(kv) == vectors.positions(ka));
+    braced.remove(kv);
     const std::vector<Eigen::MatrixXd> bad_frames = {frame_matrices[0], frame_matrices[1].leftCols(2)};
     CHECK_THROWS_WITH(braced.addKeyframed(braced.hierarchyFor(sphere), bad_frames),
                       Catch::Contains("addKeyframed (a new body): frame 1: ") && Catch::Contains("got 2"));
@@ -1760,11 +1763,12 @@ TEST_CASE("Eigen positions: starting positions, key frames and batch entries in 
     }
     vectors.setTime(ka, 0.1 * step);
     matrices.setTime(kb, 0.1 * step);
-    vectors.step(toMatrix(points), 0.2, QueryMode::kClosest, ra);
+    vectors.step(points, 0.2, QueryMode::kClosest, ra);  // a std::vector<Vec3>, read in place
     matrices.step(toMatrix(points), 0.2, QueryMode::kClosest, rb);
     checkIdentical(ra, rb, same);
     CHECK(ra.stats().hits > 200);
   }
+  CHECK(vectors.step(std::vector<Vec3>{}, 0.2).size() == 0);
 
   // Bad entries: the entry is named, and no body changes.
   const std::vector<Vec3> before0 = matrices.positions(b[0]), before1 = matrices.positions(b[1]);
