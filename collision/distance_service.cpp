@@ -571,7 +571,7 @@ struct DistanceService::Impl {
     // every placement on the way lies within the bound of the anchor, whose grown area bounds
     // theirs: the last placement's volume alone is needed (a pass without square roots).
     const TreeGeometry& g = b.deforming->geometry();
-    const double area2 = b.orientation_refs[0].placement.grownArea2(b.displacement_bound);
+    const double area2 = b.orientation_refs[0].placement.grownArea2(b.displacement_bound * DeformingBody::kBoundReach);
     if (!(b.orientation_last_drift >= 0 && b.orientation_last_lineage == g.lineage &&
           b.orientation_last.holdsWithin(g.drift - b.orientation_last_drift, area2))) {
       b.orientation_last = b.shape->placementOrientation(pos.data(), false);
@@ -586,7 +586,8 @@ struct DistanceService::Impl {
     b.orientation_refs.clear();
     b.orientation_last_drift = -1;
     if (!b.shape->closed()) return;
-    b.orientation_refs.push_back({b.shape->placementOrientation(anchor.data()), b.displacement_bound});
+    b.orientation_refs.push_back(
+        {b.shape->placementOrientation(anchor.data()), b.displacement_bound * DeformingBody::kBoundReach});
   }
 
   // A key-framed body's references, one per pair of frames (or the single frame).

@@ -15,6 +15,18 @@
 
 namespace meshsweeper {
 
+namespace {
+
+// Whether a vertex displaced by sqrt(d2) from its anchor is within its bound `delta`: squared,
+// with a relative 1e-12 that the bounds' own slack covers (eps carries a relative 1e-9; each
+// packed box a margin of 2^-21 of its largest offset, at least the displacement it was grown
+// by, of which a query point's rounding takes 2^-24). setPositions() and inflate() decide
+// alike (an audit saw positions that inflate() kept refused by setPositions(), and positions
+// computed at exactly their bound refused by rounding).
+bool withinBound(double d2, double delta) { return d2 <= delta * delta * (1 + 1e-12); }
+
+}  // namespace
+
 DeformingBody::DeformingBody(std::shared_ptr<const Hierarchy> hierarchy)
     : hierarchy_(std::move(hierarchy)) {
   if (!hierarchy_) throw std::invalid_argument("DeformingBody: null hierarchy");
@@ -300,9 +312,7 @@ bool DeformingBody::inflate(const std::vector<double>& delta) {
   constexpr double kMax = std::numeric_limits<double>::max();
   for (size_t v = 0; v < delta.size(); ++v) {  // branch-free: the compiler vectorises it
     bad |= !(delta[v] >= 0 && delta[v] <= kMax);
-    // Squared, with a relative 1e-12 that the bounds' own slack covers (eps carries 1e-9,
-    // boxes a float rounding up).
-    outside |= (positions_[v] - anchor_positions_[v]).squaredNorm() > delta[v] * delta[v] * (1 + 1e-12);
+    outside |= !withinBound((positions_[v] - anchor_positions_[v]).squaredNorm(), delta[v]);
   }
   for (size_t v = 0; bad && v < delta.size(); ++v)
     if (!(delta[v] >= 0 && delta[v] <= kMax))
@@ -351,8 +361,8 @@ DisplacementCheck DeformingBody::setPositions(const std::vector<Vec3>& positions
   checkSize(positions.size(), "positions");
   DisplacementCheck check;
   // A branch-free pass (the compiler vectorises it): positions not finite or beyond
-  // kMaxCoordinate, vertices that may be past their bound (a superset: squared, with a relative
-  // 1e-12 to spare), and how far the farthest vertex moves (the lineage's drift grows by that).
+  // kMaxCoordinate, vertices past their bound (withinBound), and how far the farthest vertex
+  // moves (the lineage's drift grows by that).
   // NaN fails every comparison, so it is caught by `finite`.
   // The same pass takes the positions' box, for the extent check.
   // With drift by region it also keeps each vertex's squared motion (in double: a float
@@ -370,7 +380,7 @@ DisplacementCheck DeformingBody::setPositions(const std::vector<Vec3>& positions
     const Vec3 d = positions[v] - anchor_positions_[v];
     const double d2 = d.squaredNorm();
     finite &= inCoordinateRange(positions[v]);
-    suspect |= d2 > delta_[v] * delta_[v] * (1 - 1e-12);
+    suspect |= !withinBound(d2, delta_[v]);
     const double step2 = used && used[v] == kInvalidIndex ? 0.0 : (positions[v] - positions_[v]).squaredNorm();
     moved2 = std::max(moved2, step2);
     if (motion2) motion2[v] = step2;
@@ -382,8 +392,10 @@ DisplacementCheck DeformingBody::setPositions(const std::vector<Vec3>& positions
       if (!inCoordinateRange(positions[v]))
         throw std::invalid_argument("DeformingBody: position " + std::to_string(v) +
                                     " is not finite or beyond 1e150 in magnitude");
-      const double excess = (positions[v] - anchor_positions_[v]).norm() - delta_[v];
-      if (excess > 0 && excess > check.excess) {
+      const double d2 = (positions[v] - anchor_positions_[v]).squaredNorm();
+      if (withinBound(d2, delta_[v])) continue;
+      const double excess = std::sqrt(d2) - delta_[v];
+      if (check.accepted || excess > check.excess) {
         check.accepted = false;
         check.excess = excess;
         check.worst_vertex = static_cast<VertexIndex>(v);

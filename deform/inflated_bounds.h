@@ -48,8 +48,12 @@ class DeformingBody {
 
   // Accepts new positions if every vertex is within its bound of the anchor; otherwise keeps the
   // previous positions and reports the worst offender. Throws std::invalid_argument on a wrong
-  // size or non-finite positions.
+  // size or non-finite positions. "Within" allows a relative 1e-12 of the squared bound, which
+  // the bounds' slack covers: positions computed at exactly their bound are not refused for
+  // their rounding, and setPositions() and inflate() decide alike. A vertex of bound delta may
+  // so lie up to delta * kBoundReach from its anchor.
   DisplacementCheck setPositions(const std::vector<Vec3>& positions);
+  static constexpr double kBoundReach = 1 + 1e-12;  // > sqrt(1 + 1e-12), rounding included
 
   // Radii: whether anchor() computes every slot's swept-sphere radius (eps, the hierarchy
   // build's radius phase: most of an anchor's cost, 6 ms on a 52k-face body). Off, anchor()

@@ -1107,6 +1107,55 @@ TEST_CASE("inflated bounds: displacements within the bounds are exact, others re
   checkInflated(scenes::randomSoup(2000, 10), 30, 200, 0xbeef05, true);
 }
 
+// Positions computed at exactly their bound (anchor + delta * unit direction) come out up to an
+// ulp past it: accepted, as inflate() keeps them (an audit saw setPositions refuse every such
+// step, and refuse positions that inflate had just kept), and the bounds still hold for them.
+TEST_CASE("inflated bounds: positions at their bound are accepted, as inflate keeps them", "[deform][inflated][at-bound]") {
+  for (const double offset : {0.0, 8.0}) {
+    Mesh mesh = scenes::icosphere(2);
+    for (Vec3& x : mesh.positions) x += Vec3(offset, -offset, 0);
+    INFO("offset " << offset);
+    const auto h = Hierarchy::build(mesh);
+    const double delta = 0.1;
+    Random rng(0x5eed + static_cast<uint64_t>(offset));
+    std::vector<Vec3> at_bound(mesh.positions.size()), past(mesh.positions.size());
+    size_t rounded_past = 0;
+    for (size_t v = 0; v < mesh.positions.size(); ++v) {
+      const Vec3 u = rng.inBox(Vec3::Constant(-1), Vec3::Constant(1)).normalized();
+      at_bound[v] = mesh.positions[v] + delta * u;
+      past[v] = mesh.positions[v] + delta * (1 + 1e-9) * u;
+      rounded_past += (at_bound[v] - mesh.positions[v]).norm() > delta;
+    }
+    CHECK(rounded_past > 0);  // the case this tests: rounding put some vertices past the bound
+
+    DeformingBody body(h);
+    body.inflate(delta);
+    const DisplacementCheck at = body.setPositions(at_bound);
+    CHECK(at.accepted);
+    CHECK(at.excess == 0);
+    CHECK(at.worst_vertex == kInvalidIndex);
+    CHECK(body.positions() == at_bound);
+    QueryChecks checks;
+    Failures bounds("validateGeometry at the bound");
+    checkBody(mesh, h, body, 200, 0x5eed, checks, bounds);
+    CHECK_FALSE(body.inflate(delta));  // kept by inflate too
+    CHECK(body.positions() == at_bound);
+    CHECK(body.setPositions(at_bound).accepted);
+
+    // A relative 1e-9 past the bound is refused and measured.
+    const DisplacementCheck beyond = body.setPositions(past);
+    CHECK_FALSE(beyond.accepted);
+    CHECK(beyond.excess == Approx(1e-9 * delta).epsilon(1e-3));
+    CHECK(beyond.worst_vertex < mesh.positions.size());
+    CHECK(body.positions() == at_bound);
+    // ... and inflate() decides alike: a bound it exceeds resets the positions to the anchor.
+    CHECK_FALSE(body.inflate(2 * delta));
+    CHECK(body.setPositions(past).accepted);
+    CHECK(body.inflate(delta));
+    CHECK(body.positions() == mesh.positions);
+  }
+}
+
 // Without radii (setRadii(false), as the distance service's bodies): an anchor skips the radius
 // phase and leaves every slot's radius unbounded; every query kind stays exact, and the bounds
 // still validate.
