@@ -52,12 +52,13 @@ using PointMatrix = Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor>;
 using PointRows = Eigen::Ref<const PointMatrix>;
 
 // The points (or positions) a call reads: any Eigen matrix or expression of doubles with three
-// columns, one row (x, y, z) per point, or a std::vector<Vec3>. A PointMatrix or a row-major map with three columns is
-// read in place; any other layout (a column-major Eigen::MatrixXd, a block) is copied once for
-// the call. A matrix whose column count is fixed at another number does not compile; a dynamic
-// one (Eigen::MatrixXd) with another count throws std::invalid_argument before the call does
-// anything (Eigen::Ref alone does not check it in a release build: a MatrixXd of 2 columns was
-// read past its end, found by an audit). It is a view for the call's duration, not to be kept.
+// columns, one row (x, y, z) per point, or a std::vector<Vec3>. A PointMatrix, a row-major map with
+// three columns or a std::vector<Vec3> is read in place; any other layout (a column-major
+// Eigen::MatrixXd, a block) is copied once for the call. A matrix whose column count is fixed at
+// another number does not compile; a dynamic one (Eigen::MatrixXd) with another count throws
+// std::invalid_argument before the call does anything (Eigen::Ref alone does not check it in a
+// release build: a MatrixXd of 2 columns was read past its end, found by an audit). It is a view
+// for the call's duration, not to be kept.
 class PointsRef {
  public:
   template <typename Derived>
