@@ -45,7 +45,7 @@ int runCheck(int argc, char** argv, int first) {
   if (args.has("--seed")) options.seed = args.integer("--seed", 0, UINT64_MAX);
   options.use_sign = !args.has("--unsigned");
 
-  const Mesh mesh = readMesh(args.positional()[0]);
+  const Mesh mesh = readMeshArgument("check", args.positional()[0]);
   const VdbCheckReport r = vdbCheck(mesh, options);
   std::printf("mesh: %s\n", oneLine(mesh.name).c_str());  // one key: value per line
   std::printf("triangles: %zu\n", r.triangles);

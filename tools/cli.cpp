@@ -153,6 +153,13 @@ double parseFiniteDouble(const std::string& text, const std::string& what) {
   return x;
 }
 
+Mesh readMeshArgument(const char* command, const std::string& path) {
+  if (path == "-")
+    throw UsageError(std::string(command) +
+                     ": a mesh is read from a file, not from standard input ('-'; a file called '-' is ./-)");
+  return readMesh(path);
+}
+
 int standardStreamOf(const std::string& path) {
   if (path == "-") return 1;
   struct stat named {};

@@ -4,6 +4,7 @@
 //
 // Exit codes of the tool: 0 success, 1 an input or output file could not be read, parsed or
 // written (MeshError, IoError), 2 a bad command line (UsageError).
+#include "core/mesh.h"
 #include "core/types.h"
 #include "scenes/output_file.h"
 
@@ -86,6 +87,10 @@ class Args {
 uint64_t parseInteger(const std::string& text, const std::string& what, uint64_t min, uint64_t max);
 // Parses a whole string as a finite double; throws UsageError.
 double parseFiniteDouble(const std::string& text, const std::string& what);
+
+// The mesh a command line names (readMesh). "-" is refused (UsageError): meshes are read from
+// files, not from standard input ("./-" names a file called "-").
+Mesh readMeshArgument(const char* command, const std::string& path);
 
 // 1 or 2 when `path` names standard output ("-" included) or standard error (/dev/stdout,
 // /dev/fd/2, /proc/self/fd/1, the file a stream is redirected to), else 0.

@@ -165,7 +165,7 @@ int runClosest(int argc, char** argv, int first) {
   if (signed_rows && mode == Mode::kAnytime)
     throw UsageError("closest: --signed needs exact closest points: it cannot be combined with --tolerance");
 
-  const Mesh mesh = readMesh(mesh_path);
+  const Mesh mesh = readMeshArgument("closest", mesh_path);
   const std::vector<Vec3> points = readPoints(points_path);
   if (points.size() >= std::numeric_limits<uint32_t>::max())
     throw UsageError("closest: too many points (" + std::to_string(points.size()) + ")");

@@ -318,8 +318,8 @@ int runHausdorff(int argc, char** argv, int first) {
                      (json_to_stdout ? std::string("standard output")
                                      : "file '" + args.value("--colors") + "'"));
 
-  const Mesh a = readMesh(a_path);
-  const Mesh b = readMesh(b_path);
+  const Mesh a = readMeshArgument("hausdorff", a_path);
+  const Mesh b = readMeshArgument("hausdorff", b_path);
   const double diagonal = meshDiagonal(a);
   if (!(diagonal > 0) && !(options.tolerance > 0))
     throw MeshError(a_path + ": all vertices coincide (zero diagonal); give --tolerance");

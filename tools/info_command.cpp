@@ -28,7 +28,7 @@ int runInfo(int argc, char** argv, int first) {
   args.expectPositional({"MESH"});
   const std::string& path = args.positional()[0];
   const uint64_t queries = args.has("--queries") ? args.integer("--queries", 0, 100000000) : 1000;
-  const Mesh mesh = readMesh(path);
+  const Mesh mesh = readMeshArgument("info", path);
   const std::shared_ptr<const Hierarchy> h = Hierarchy::build(mesh);
   const HierarchyStats& s = h->stats();
   QueryStream stream(h);

@@ -107,7 +107,7 @@ int runSample(int argc, char** argv, int first) {
   const uint64_t seed =
       args.has("--seed") ? args.integer("--seed", 0, std::numeric_limits<uint64_t>::max()) : 1;
 
-  const Mesh mesh = readMesh(args.positional()[0]);
+  const Mesh mesh = readMeshArgument("sample", args.positional()[0]);
   const std::string problem = checkMesh(mesh);
   if (!problem.empty()) throw MeshError(problem);
 

@@ -213,6 +213,13 @@ check(help_unknown RC 2 ARGS help frobnicate ERR "meshsweep: help: unknown comma
 check(missing_points RC 2 ARGS closest quad.off ERR "meshsweep: closest: missing argument POINTS")
 check(missing_mesh RC 2 ARGS closest ERR "meshsweep: closest: missing argument MESH")
 check(extra_argument RC 2 ARGS closest quad.off points.txt extra ERR "unexpected argument 'extra'")
+# Found by an audit: a mesh named '-' said "-: no such file"; standard input is for points only.
+check(mesh_stdin_closest RC 2 ARGS closest - points.txt
+  ERR "meshsweep: closest: a mesh is read from a file, not from standard input")
+check(mesh_stdin_hausdorff RC 2 ARGS hausdorff quad.off - ERR "meshsweep: hausdorff: a mesh is read from a file")
+check(mesh_stdin_info RC 2 ARGS info - ERR "meshsweep: info: a mesh is read from a file")
+check(mesh_stdin_sample RC 2 ARGS sample - 5 ERR "meshsweep: sample: a mesh is read from a file")
+check(mesh_stdin_check RC 2 ARGS check - ERR "meshsweep: check: a mesh is read from a file")
 check(unknown_option RC 2 ARGS closest quad.off points.txt --fast
   ERR "meshsweep: closest: unknown option --fast")
 check(missing_value RC 2 ARGS closest quad.off points.txt --tolerance ERR "needs a value")
